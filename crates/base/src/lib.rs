@@ -1,0 +1,46 @@
+//! # megaray-base: the foundations every other megaray crate stands on
+//!
+//! Nothing here knows about files, scenes or images. It holds:
+//! - [`Aabb`]: axis-aligned bounding boxes (build and trace both use them);
+//! - [`Ray`] and [`intersect_triangle`]: the scalar, watertight ray-triangle test
+//!   (Woop, Benthin and Wald 2013) that is the reference every faster kernel is tested against;
+//! - [`Progress`]: how long-running library code reports progress without knowing about terminals;
+//! - [`parse_size`]: `64K`, `1G`, `1.5GiB` style sizes, for memory budgets on the command line.
+//!
+//! ```
+//! use megaray_base::{Ray, intersect_triangle, Vec3};
+//! let ray = Ray::new(Vec3::new(0.25, 0.25, -1.0), Vec3::Z);
+//! let hit = intersect_triangle(&ray, [Vec3::ZERO, Vec3::X, Vec3::Y], f32::INFINITY).unwrap();
+//! assert!((hit.t - 1.0).abs() < 1e-6);
+//! ```
+
+mod aabb;
+mod progress;
+mod ray;
+mod size;
+
+pub use aabb::Aabb;
+pub use glam::Vec3;
+pub use progress::{NoProgress, Progress};
+pub use ray::{intersect_triangle, Ray, TriHit};
+pub use size::{format_size, parse_size};
+
+/// A triangle's three corners as plain arrays, the form triangles take on disk and in streams.
+pub type TriVerts = [[f32; 3]; 3];
+
+/// `true` when every coordinate of the triangle is finite (neither NaN nor infinite).
+#[inline]
+pub fn tri_is_finite(t: &TriVerts) -> bool {
+    t.iter().flatten().all(|c| c.is_finite())
+}
+
+/// `true` when the triangle has (numerically) zero area: such triangles can never be hit
+/// by the watertight test and are dropped by the builder (and counted).
+#[inline]
+pub fn tri_is_degenerate(t: &TriVerts) -> bool {
+    let a = Vec3::from(t[0]);
+    let b = Vec3::from(t[1]);
+    let c = Vec3::from(t[2]);
+    let n = (b - a).cross(c - a);
+    n.length_squared() == 0.0 || !n.is_finite()
+}

@@ -1,0 +1,330 @@
+//! # megaray-build: the out-of-core streaming builder
+//!
+//! Turns model files of any size into one `.mray` scene file in bounded memory, following
+//! the streaming approach of Dietrich and Slusallek's massive-model tutorial (EG 2006), with
+//! BVHs instead of k-d trees:
+//!
+//! 1. **Import** ([`sink`]): every input streams into one positions-only triangle stream file
+//!    ([`stream::StreamTri`], 48 bytes a triangle) plus attribute streams keyed by triangle id
+//!    ([`attrs`]); bounds are gathered on the way, zero-area triangles dropped and counted.
+//! 2. **Split** ([`split`]): while a stream holds more triangles than one part may, choose a
+//!    plane with the binned SAH over triangle centroids (longest-axis midpoint when the SAH finds
+//!    nothing) and route each triangle by its centroid into one of two child files. The bins of
+//!    each child are gathered while it is written, so every level costs one read and one write.
+//! 3. **Parts** ([`bvh`], [`tiles`]): each stream small enough is loaded and built in core
+//!    (binned SAH, collapsed to a 4-wide BVH), cut into page-aligned tiles and appended to the
+//!    scene file with its attributes. Parts build in parallel, as many at once as threads, each
+//!    sized so that all of them fit `build_mem` together.
+//! 4. **Top level**: a BVH over the parts' boxes, written first in the file.
+//!
+//! Temporary files live in a folder next to the output and are removed on success, on error
+//! and on cancellation (see [`BuildOptions::cancel`]).
+//!
+//! ```no_run
+//! use megaray_build::{build_scene, BuildOptions};
+//! let opts = BuildOptions { build_mem: 1 << 30, ..BuildOptions::default() };
+//! let summary = build_scene(&["model.ply".into()], "model.mray".as_ref(), &opts, &megaray_base::NoProgress).unwrap();
+//! println!("{} triangles in {} parts", summary.triangles, summary.parts);
+//! ```
+
+pub mod attrs;
+pub mod bvh;
+pub mod sink;
+pub mod split;
+pub mod stream;
+pub mod tiles;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use megaray_base::{Aabb, Progress};
+use megaray_scene::format::{ChildRef, Node4, PackedNormals};
+use megaray_scene::{PartBlob, SceneWriter};
+
+use crate::bvh::{build_bvh4, BvhConfig, Kid};
+use crate::stream::{StreamFile, StreamReader, StreamTri};
+
+/// Estimated peak bytes per triangle of an in-core part build (stream records, boxes, the
+/// binary and 4-wide trees, the tiles and attribute arrays being assembled).
+pub const INCORE_BYTES_PER_TRI: u64 = 320;
+/// Memory set aside from `build_mem` for I/O buffers and bookkeeping.
+pub const FIXED_RESERVE: u64 = 64 << 20;
+
+/// Settings of a build.
+#[derive(Clone, Debug)]
+pub struct BuildOptions {
+    /// Memory budget in bytes. Peak memory stays within it plus a small fixed overhead.
+    pub build_mem: u64,
+    /// Worker threads (parts built at once, split passes at once).
+    pub threads: usize,
+    /// Target tile size in bytes (tiles are the unit of paging).
+    pub tile_target: u32,
+    /// Largest part, in triangles; `None`: derived from `build_mem` and `threads`.
+    pub max_part_tris: Option<u64>,
+    /// Memory the readers may use for vertex tables (part of `build_mem`).
+    pub import_mem: Option<u64>,
+    /// Set it from another thread (a Ctrl-C handler) to stop the build; it then returns
+    /// [`BuildError::Cancelled`] and removes its temporary files.
+    pub cancel: Arc<AtomicBool>,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            build_mem: 2 << 30,
+            threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
+            tile_target: 256 << 10,
+            max_part_tris: None,
+            import_mem: None,
+            cancel: Arc::new(AtomicBool::new(false)),
+        }
+    }
+}
+
+impl BuildOptions {
+    /// The largest part (in triangles) these options allow.
+    pub fn part_limit(&self) -> u64 {
+        self.max_part_tris.unwrap_or_else(|| {
+            let usable = self.build_mem.saturating_sub(FIXED_RESERVE);
+            (usable / (self.threads.max(1) as u64 * INCORE_BYTES_PER_TRI)).max(1024)
+        })
+    }
+}
+
+/// What a build did.
+#[derive(Clone, Debug, Default)]
+pub struct BuildSummary {
+    pub inputs: usize,
+    pub triangles: u64,
+    pub degenerate_dropped: u64,
+    pub parts: u32,
+    pub tiles: u32,
+    /// Deepest level of file splits (0: the whole model was one part).
+    pub split_levels: u32,
+    pub part_limit: u64,
+    pub file_bytes: u64,
+    /// Bytes read from inputs.
+    pub input_bytes: u64,
+    /// Bytes read and written in temporary streams.
+    pub temp_read: u64,
+    pub temp_written: u64,
+    pub import_s: f64,
+    pub split_s: f64,
+    pub parts_s: f64,
+    pub total_s: f64,
+}
+
+/// A build failure, naming the file where it happened.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    #[error(transparent)]
+    Import(#[from] megaray_import::ImportError),
+    #[error(transparent)]
+    Scene(#[from] megaray_scene::SceneError),
+    #[error("{}: cannot {what}: {err}", path.display())]
+    Io { path: PathBuf, what: &'static str, err: std::io::Error },
+    #[error("{}: no triangles to build (all inputs empty or degenerate)", .0.display())]
+    NoTriangles(PathBuf),
+    #[error("{0}")]
+    Invalid(String),
+    #[error("interrupted; temporary files removed")]
+    Cancelled,
+}
+
+impl BuildError {
+    pub fn io(path: &Path, what: &'static str, err: std::io::Error) -> BuildError {
+        BuildError::Io { path: path.to_path_buf(), what, err }
+    }
+}
+
+pub(crate) fn check_cancel(opts: &BuildOptions) -> Result<(), BuildError> {
+    if opts.cancel.load(Ordering::Relaxed) {
+        Err(BuildError::Cancelled)
+    } else {
+        Ok(())
+    }
+}
+
+/// Builds `inputs` (model files, merged into one scene) into the scene file `out`.
+pub fn build_scene(
+    inputs: &[PathBuf],
+    out: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<BuildSummary, BuildError> {
+    if inputs.is_empty() {
+        return Err(BuildError::Invalid("no input files".into()));
+    }
+    if opts.build_mem < 2 * FIXED_RESERVE && opts.max_part_tris.is_none() {
+        return Err(BuildError::Invalid(format!(
+            "--build-mem {} is too small: at least {} is needed",
+            megaray_base::format_size(opts.build_mem),
+            megaray_base::format_size(2 * FIXED_RESERVE)
+        )));
+    }
+    let t0 = Instant::now();
+    let out_dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let tmp = tempfile::Builder::new()
+        .prefix(".megaray-build-")
+        .tempdir_in(out_dir)
+        .map_err(|e| BuildError::io(out_dir, "create a temporary folder in", e))?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(opts.threads.max(1))
+        .build()
+        .map_err(|e| BuildError::Invalid(format!("cannot start threads: {e}")))?;
+
+    // 1. Import.
+    let mut sink = sink::BuildSink::new(tmp.path(), opts)?;
+    let mut input_bytes = 0;
+    for input in inputs {
+        let iopts = megaray_import::ImportOptions {
+            mem_limit: opts.import_mem.unwrap_or(opts.build_mem / 4),
+            temp_dir: tmp.path().to_path_buf(),
+        };
+        let s = match megaray_import::import_file(input, &iopts, &mut sink, progress) {
+            Ok(s) => s,
+            // A failure of our own (disk full, cancelled) outranks the reader's view of it.
+            Err(e) => return Err(sink.take_error().unwrap_or(e.into())),
+        };
+        input_bytes += s.bytes;
+        check_cancel(opts)?;
+    }
+    let (root, mut attrs, materials, dropped) = sink.finish()?;
+    if root.count == 0 {
+        return Err(BuildError::NoTriangles(inputs[0].clone()));
+    }
+    let triangles = root.count;
+    let bounds = root.bounds;
+    let import_s = t0.elapsed().as_secs_f64();
+    attrs.finish_writing()?;
+
+    // 2. Split.
+    let t1 = Instant::now();
+    let limit = opts.part_limit();
+    let io = split::IoCount::default();
+    progress.stage("split", triangles * 48 * split::estimate_levels(triangles, limit) as u64);
+    let mut parts = pool.install(|| split::split(root, limit, opts, &io, progress))?;
+    progress.finish();
+    // Parts in a spatially coherent order (the order the splits produced them).
+    parts.sort_by_key(|p| p.path.clone());
+    let split_s = t1.elapsed().as_secs_f64();
+    let split_levels = parts.iter().map(|p| p.level).max().unwrap_or(0);
+
+    // 3. Top level over the parts' boxes, then the parts.
+    let t2 = Instant::now();
+    let boxes: Vec<Aabb> = parts.iter().map(|p| p.bounds).collect();
+    let (top_nodes, top_depth) = top_level(&boxes);
+    let writer = SceneWriter::create(out, top_nodes, top_depth, parts.len() as u32, opts.tile_target)?;
+    let writer = Mutex::new(writer);
+    progress.stage("build parts", triangles);
+    let single = parts.len() == 1;
+    let attrs = &attrs;
+    pool.install(|| {
+        use rayon::prelude::*;
+        parts.par_iter().enumerate().with_max_len(1).try_for_each(|(i, p)| -> Result<(), BuildError> {
+            check_cancel(opts)?;
+            let blob = build_part(p, attrs, opts, single, &io)?;
+            let n = blob.tri_count();
+            writer.lock().unwrap_or_else(|e| e.into_inner()).append_part(i as u32, blob)?;
+            let _ = std::fs::remove_file(&p.path);
+            progress.inc(n);
+            Ok(())
+        })
+    })?;
+    progress.finish();
+    let writer = writer.into_inner().unwrap_or_else(|e| e.into_inner());
+    let file_bytes = writer.finish(bounds, dropped, &materials)?;
+    let parts_s = t2.elapsed().as_secs_f64();
+    let tiles = count_tiles(out).unwrap_or(0);
+    drop(tmp);
+    Ok(BuildSummary {
+        inputs: inputs.len(),
+        triangles,
+        degenerate_dropped: dropped,
+        parts: parts.len() as u32,
+        tiles,
+        split_levels,
+        part_limit: limit,
+        file_bytes,
+        input_bytes,
+        temp_read: io.read.load(Ordering::Relaxed),
+        temp_written: io.written.load(Ordering::Relaxed) + triangles * 48,
+        import_s,
+        split_s,
+        parts_s,
+        total_s: t0.elapsed().as_secs_f64(),
+    })
+}
+
+fn count_tiles(out: &Path) -> Option<u32> {
+    megaray_scene::Scene::open(out).ok().map(|s| s.header().tile_count)
+}
+
+/// The top-level tree over part boxes, in file layout; returns nodes and depth.
+pub fn top_level(boxes: &[Aabb]) -> (Vec<Node4>, u32) {
+    let bvh = build_bvh4(boxes, BvhConfig { max_leaf: 1, parallel_above: usize::MAX });
+    let nodes = bvh
+        .nodes
+        .iter()
+        .map(|n| {
+            let mut out = Node4::EMPTY;
+            for k in 0..4 {
+                let r = match n.kids[k] {
+                    Kid::Empty => continue,
+                    Kid::Inner(c) => ChildRef::inner(c),
+                    Kid::Leaf { start, count } => {
+                        debug_assert_eq!(count, 1);
+                        ChildRef::part(bvh.order[start as usize])
+                    }
+                };
+                out.set(k, &n.bounds[k], r);
+            }
+            out
+        })
+        .collect();
+    (nodes, bvh.depth)
+}
+
+/// Loads one part's stream, builds its tree, cuts it into tiles and gathers its attributes.
+fn build_part(
+    s: &StreamFile,
+    attrs: &attrs::AttrStreams,
+    opts: &BuildOptions,
+    parallel: bool,
+    io: &split::IoCount,
+) -> Result<PartBlob, BuildError> {
+    let mut recs = vec![StreamTri { v: [[0.0; 3]; 3], reserved: 0, id: 0 }; s.count as usize];
+    let mut r = StreamReader::open(s)?;
+    let mut at = 0;
+    while at < recs.len() {
+        let n = r.read(&mut recs[at..])?;
+        if n == 0 {
+            break;
+        }
+        at += n;
+    }
+    io.read.fetch_add(s.count * 48, Ordering::Relaxed);
+    let boxes: Vec<Aabb> = recs.iter().map(|t| t.bounds()).collect();
+    let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX } };
+    let bvh = build_bvh4(&boxes, cfg);
+    drop(boxes);
+    let ids: Vec<u64> = recs.iter().map(|t| t.id).collect();
+    let tris: Vec<[[f32; 3]; 3]> = recs.iter().map(|t| t.v).collect();
+    drop(recs);
+    let tiled = tiles::tile_part(&bvh, &tris, opts.tile_target as u64);
+    drop(tris);
+    let ids: Vec<u64> = tiled.tri_source.iter().map(|&i| ids[i as usize]).collect();
+    Ok(PartBlob {
+        bounds: bvh.bounds,
+        depth: bvh.depth,
+        root_tile: tiled.root_tile,
+        root_node: tiled.root_node,
+        normals: attrs.gather::<PackedNormals>(attrs::NORMAL, &ids)?,
+        uvs: attrs.gather::<[[f32; 2]; 3]>(attrs::UV, &ids)?,
+        colors: attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &ids)?,
+        materials: attrs.gather::<u32>(attrs::MATERIAL, &ids)?,
+        tiles: tiled.tiles,
+    })
+}

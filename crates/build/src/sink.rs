@@ -1,0 +1,95 @@
+//! The import end of the build: a [`TriangleSink`] that writes the positions stream and the
+//! attribute streams, drops zero-area triangles (counting them) and collects materials.
+
+use std::path::Path;
+
+use megaray_import::{ImportError, Material, TriAttr, TriangleSink};
+use megaray_scene::MaterialDesc;
+
+use crate::attrs::AttrStreams;
+use crate::stream::{StreamFile, StreamTri, StreamWriter};
+use crate::{BuildError, BuildOptions};
+
+pub struct BuildSink<'a> {
+    stream: StreamWriter,
+    attrs: AttrStreams,
+    materials: Vec<MaterialDesc>,
+    dropped: u64,
+    error: Option<BuildError>,
+    opts: &'a BuildOptions,
+    seen: u64,
+}
+
+impl<'a> BuildSink<'a> {
+    pub fn new(dir: &Path, opts: &'a BuildOptions) -> Result<BuildSink<'a>, BuildError> {
+        Ok(BuildSink {
+            stream: StreamWriter::create(&dir.join("s"), None, 0)?,
+            attrs: AttrStreams::new(dir),
+            materials: Vec::new(),
+            dropped: 0,
+            error: None,
+            opts,
+            seen: 0,
+        })
+    }
+
+    /// The sink's own failure (disk full, cancelled), if it had one.
+    pub fn take_error(&mut self) -> Option<BuildError> {
+        self.error.take()
+    }
+
+    /// Closes the streams: the positions stream, the attribute streams, the materials, and
+    /// the number of degenerate triangles dropped.
+    pub fn finish(self) -> Result<(StreamFile, AttrStreams, Vec<MaterialDesc>, u64), BuildError> {
+        if let Some(e) = self.error {
+            return Err(e);
+        }
+        Ok((self.stream.finish()?, self.attrs, self.materials, self.dropped))
+    }
+}
+
+impl TriangleSink for BuildSink<'_> {
+    fn triangle(&mut self, p: [[f32; 3]; 3], attr: &TriAttr) -> Result<(), ImportError> {
+        self.seen += 1;
+        if self.seen % 65536 == 0 && self.opts.cancel.load(std::sync::atomic::Ordering::Relaxed) {
+            self.error = Some(BuildError::Cancelled);
+            return Err(ImportError::new(Path::new("(build)"), None, "interrupted"));
+        }
+        if !megaray_base::tri_is_finite(&p) {
+            return Err(ImportError::new(
+                Path::new("(input)"),
+                Some(format!("triangle {}", self.seen - 1)),
+                "non-finite coordinate",
+            ));
+        }
+        if megaray_base::tri_is_degenerate(&p) {
+            self.dropped += 1;
+            return Ok(());
+        }
+        let id = self.stream.count();
+        let r = self
+            .stream
+            .push(&StreamTri { v: p, reserved: 0, id })
+            .and_then(|_| self.attrs.push(attr));
+        if let Err(e) = r {
+            let msg = e.to_string();
+            self.error = Some(e);
+            return Err(ImportError::new(Path::new("(build)"), None, msg));
+        }
+        Ok(())
+    }
+
+    fn material(&mut self, m: Material) -> u32 {
+        self.materials.push(MaterialDesc {
+            name: m.name,
+            diffuse: m.diffuse,
+            specular: m.specular,
+            shininess: m.shininess,
+            opacity: m.opacity,
+            metallic: m.metallic,
+            roughness: m.roughness,
+            texture: m.texture.map(|t| t.to_string_lossy().into_owned()),
+        });
+        (self.materials.len() - 1) as u32
+    }
+}

@@ -1,0 +1,124 @@
+//! Cutting a part's 4-wide BVH into tiles: the conversion from build layout to file layout.
+//!
+//! A tile holds whole subtrees where it can. Subtrees of at most `target` bytes (nodes at
+//! 128 bytes, triangles at 36) are *units*: a unit is never split across tiles. Nodes above
+//! the units stand alone. Walking the tree depth-first, units and lone nodes are packed into
+//! tiles next-fit, so a tile holds neighbouring geometry. Inside a tile, nodes keep depth-first
+//! order (children after parents); a child in another tile is reached through a link.
+
+use megaray_scene::format::{ChildRef, Node4, Tri};
+use megaray_scene::TileBlob;
+
+use crate::bvh::{Bvh4, Kid};
+
+/// The tiles of one part.
+pub struct Tiled {
+    pub tiles: Vec<TileBlob>,
+    pub root_tile: u32,
+    pub root_node: u32,
+    /// For each triangle in file order (tile by tile), its index in the `tris` given to
+    /// [`tile_part`] (attributes are gathered in this order).
+    pub tri_source: Vec<u32>,
+}
+
+/// Lays out `bvh` (whose leaves index `tris` through `bvh.order`) in tiles of about `target` bytes.
+pub fn tile_part(bvh: &Bvh4, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
+    let nodes = &bvh.nodes;
+    // Subtree sizes, bottom-up (children have larger indices than their parent).
+    let mut size = vec![0u64; nodes.len()];
+    for i in (0..nodes.len()).rev() {
+        let mut s = 128u64;
+        for kid in nodes[i].kids {
+            s += match kid {
+                Kid::Inner(c) => size[c as usize],
+                Kid::Leaf { count, .. } => 36 * count as u64,
+                Kid::Empty => 0,
+            };
+        }
+        size[i] = s;
+    }
+    let own = |i: usize| -> u64 {
+        128 + nodes[i]
+            .kids
+            .iter()
+            .map(|k| if let Kid::Leaf { count, .. } = k { 36 * *count as u64 } else { 0 })
+            .sum::<u64>()
+    };
+
+    // Pack: tile and local index of every node, in depth-first item order.
+    let mut tile_of = vec![u32::MAX; nodes.len()];
+    let mut local_of = vec![0u32; nodes.len()];
+    let mut tile_nodes: Vec<Vec<u32>> = Vec::new();
+    let mut fill = u64::MAX; // bytes in the current tile; MAX forces a first tile
+    let mut stack = vec![0u32];
+    let mut unit = Vec::new();
+    while let Some(n) = stack.pop() {
+        let n = n as usize;
+        let is_unit = size[n] <= target;
+        let cost = if is_unit { size[n] } else { own(n) };
+        if fill == u64::MAX || (fill > 0 && fill + cost > target) {
+            tile_nodes.push(Vec::new());
+            fill = 0;
+        }
+        let t = tile_nodes.len() - 1;
+        fill += cost;
+        if is_unit {
+            // The whole subtree, depth-first.
+            unit.clear();
+            unit.push(n as u32);
+            while let Some(m) = unit.pop() {
+                tile_of[m as usize] = t as u32;
+                local_of[m as usize] = tile_nodes[t].len() as u32;
+                tile_nodes[t].push(m);
+                for kid in nodes[m as usize].kids.iter().rev() {
+                    if let Kid::Inner(c) = kid {
+                        unit.push(*c);
+                    }
+                }
+            }
+        } else {
+            tile_of[n] = t as u32;
+            local_of[n] = tile_nodes[t].len() as u32;
+            tile_nodes[t].push(n as u32);
+            for kid in nodes[n].kids.iter().rev() {
+                if let Kid::Inner(c) = kid {
+                    stack.push(*c);
+                }
+            }
+        }
+    }
+
+    // Emit file-layout nodes and triangles.
+    let mut tiles = Vec::with_capacity(tile_nodes.len());
+    let mut tri_source = Vec::with_capacity(tris.len());
+    for (t, list) in tile_nodes.iter().enumerate() {
+        let mut blob = TileBlob { nodes: Vec::with_capacity(list.len()), tris: Vec::new() };
+        for &n in list {
+            let mut out = Node4::EMPTY;
+            for (k, kid) in nodes[n as usize].kids.iter().enumerate() {
+                let r = match *kid {
+                    Kid::Empty => continue,
+                    Kid::Inner(c) => {
+                        if tile_of[c as usize] == t as u32 {
+                            ChildRef::inner(local_of[c as usize])
+                        } else {
+                            ChildRef::link(tile_of[c as usize], local_of[c as usize])
+                        }
+                    }
+                    Kid::Leaf { start, count } => {
+                        let first = blob.tris.len() as u32;
+                        for &p in &bvh.order[start as usize..(start + count) as usize] {
+                            blob.tris.push(Tri { v: tris[p as usize] });
+                            tri_source.push(p);
+                        }
+                        ChildRef::leaf(first, count)
+                    }
+                };
+                out.set(k, &nodes[n as usize].bounds[k], r);
+            }
+            blob.nodes.push(out);
+        }
+        tiles.push(blob);
+    }
+    Tiled { tiles, root_tile: tile_of[0], root_node: local_of[0], tri_source }
+}

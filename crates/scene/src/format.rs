@@ -1,0 +1,366 @@
+//! The on-disk structs of the `.mray` scene file. `docs/FORMAT.md` describes the same bytes
+//! for readers in other languages; keep the two in step (and bump [`VERSION`] on any change).
+//!
+//! Everything is little-endian, `#[repr(C)]` and [`Pod`], with its size asserted at compile
+//! time, so that the reader can cast mapped bytes without copying.
+
+use bytemuck::{Pod, Zeroable};
+use megaray_base::Aabb;
+
+/// The first eight bytes of every scene file.
+pub const MAGIC: [u8; 8] = *b"MRAYSCN\x1a";
+/// The format version this code writes and reads.
+pub const VERSION: u32 = 1;
+/// Page size: tiles and sections start on multiples of it.
+pub const PAGE: u64 = 4096;
+/// Bytes of the header page (the header struct is followed by zeros up to it).
+pub const HEADER_PAGE: u64 = PAGE;
+
+/// Header attribute flags: which attribute kinds some part carries.
+pub const ATTR_NORMAL: u32 = 1;
+pub const ATTR_UV: u32 = 2;
+pub const ATTR_COLOR: u32 = 4;
+pub const ATTR_MATERIAL: u32 = 8;
+
+/// The file header, at byte 0. 256 bytes; the rest of the first page is zero.
+///
+/// | bytes | field |
+/// |---|---|
+/// | 0..8 | `magic` = `MRAYSCN\x1a` |
+/// | 8..12 | `version` |
+/// | 12..16 | `header_bytes` = 256 |
+/// | 16..24 | `file_bytes`: the file's exact length |
+/// | 24..32 | `tri_count`: triangles in the scene |
+/// | 32..40 | `degenerate_dropped`: zero-area triangles the build dropped |
+/// | 40..64 | `bounds`: scene bounding box (min xyz, max xyz) |
+/// | 64..68 | `part_count` |
+/// | 68..72 | `tile_count` |
+/// | 72..76 | `tile_target`: the tile size the build aimed at, bytes |
+/// | 76..80 | `attr_flags`: `ATTR_*` bits |
+/// | 80..88 | `top_nodes_off`: offset of the top-level tree ([`Node4`] array) |
+/// | 88..92 | `top_node_count` |
+/// | 92..96 | `top_depth`: depth of the top-level tree (root = 1) |
+/// | 96..104 | `parts_off`: offset of the part directory ([`PartEntry`] array) |
+/// | 104..112 | `tiles_off`: offset of the tile directory ([`TileEntry`] array) |
+/// | 112..120 | `materials_off`: offset of the material table ([`MaterialRecord`] array + names) |
+/// | 120..128 | `materials_bytes` |
+/// | 128..132 | `material_count` |
+/// | 132..136 | reserved, zero |
+/// | 136..144 | `meta_checksum`: XXH3-64 of top-level tree, part, tile and material tables, in that order |
+/// | 144..248 | reserved, zero |
+/// | 248..256 | `header_checksum`: XXH3-64 of bytes 0..248 |
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct Header {
+    pub magic: [u8; 8],
+    pub version: u32,
+    pub header_bytes: u32,
+    pub file_bytes: u64,
+    pub tri_count: u64,
+    pub degenerate_dropped: u64,
+    pub bounds: Aabb,
+    pub part_count: u32,
+    pub tile_count: u32,
+    pub tile_target: u32,
+    pub attr_flags: u32,
+    pub top_nodes_off: u64,
+    pub top_node_count: u32,
+    pub top_depth: u32,
+    pub parts_off: u64,
+    pub tiles_off: u64,
+    pub materials_off: u64,
+    pub materials_bytes: u64,
+    pub material_count: u32,
+    pub reserved0: u32,
+    pub meta_checksum: u64,
+    pub reserved: [u64; 13],
+    pub header_checksum: u64,
+}
+const _: () = assert!(std::mem::size_of::<Header>() == 256);
+
+/// A 4-wide BVH node: the boxes of its four children (structure of arrays, so one SIMD
+/// register holds one coordinate of all four) and their [`ChildRef`]s. 128 bytes, two cache
+/// lines, 64-byte aligned in the file. Unused slots have an empty box (`lo = +inf`,
+/// `hi = -inf`) and the child [`ChildRef::EMPTY`].
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct Node4 {
+    pub lo_x: [f32; 4],
+    pub hi_x: [f32; 4],
+    pub lo_y: [f32; 4],
+    pub hi_y: [f32; 4],
+    pub lo_z: [f32; 4],
+    pub hi_z: [f32; 4],
+    pub child: [u64; 4],
+}
+const _: () = assert!(std::mem::size_of::<Node4>() == 128);
+
+impl Node4 {
+    /// A node with four empty slots.
+    pub const EMPTY: Node4 = Node4 {
+        lo_x: [f32::INFINITY; 4],
+        hi_x: [f32::NEG_INFINITY; 4],
+        lo_y: [f32::INFINITY; 4],
+        hi_y: [f32::NEG_INFINITY; 4],
+        lo_z: [f32::INFINITY; 4],
+        hi_z: [f32::NEG_INFINITY; 4],
+        child: [ChildRef::EMPTY.0; 4],
+    };
+
+    /// Sets slot `i` to `child` with bounds `b`.
+    pub fn set(&mut self, i: usize, b: &Aabb, child: ChildRef) {
+        self.lo_x[i] = b.min[0];
+        self.lo_y[i] = b.min[1];
+        self.lo_z[i] = b.min[2];
+        self.hi_x[i] = b.max[0];
+        self.hi_y[i] = b.max[1];
+        self.hi_z[i] = b.max[2];
+        self.child[i] = child.0;
+    }
+
+    /// The bounds of slot `i`.
+    pub fn bounds(&self, i: usize) -> Aabb {
+        Aabb {
+            min: [self.lo_x[i], self.lo_y[i], self.lo_z[i]],
+            max: [self.hi_x[i], self.hi_y[i], self.hi_z[i]],
+        }
+    }
+}
+
+/// A reference from a [`Node4`] slot to a child: one tagged 64-bit integer.
+///
+/// | bits 63..62 | meaning | payload |
+/// |---|---|---|
+/// | `00` | inner node in the same node array | bits 0..32: node index |
+/// | `01` | leaf: triangles of the same tile | bits 0..32: first triangle, bits 32..40: count (1..=255) |
+/// | `10` | link: a node in another tile | bits 0..32: tile index, bits 32..62: node index in that tile |
+/// | `11` | part (top-level tree only): the root of a part | bits 0..32: part index |
+///
+/// All ones is [`ChildRef::EMPTY`], an unused slot.
+#[repr(transparent)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Pod, Zeroable)]
+pub struct ChildRef(pub u64);
+
+/// What a [`ChildRef`] points at, decoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Child {
+    Empty,
+    Inner(u32),
+    Leaf { first: u32, count: u32 },
+    Link { tile: u32, node: u32 },
+    Part(u32),
+}
+
+impl ChildRef {
+    pub const EMPTY: ChildRef = ChildRef(u64::MAX);
+    const KIND_SHIFT: u32 = 62;
+
+    pub fn inner(node: u32) -> ChildRef {
+        ChildRef(node as u64)
+    }
+    pub fn leaf(first: u32, count: u32) -> ChildRef {
+        debug_assert!((1..=255).contains(&count));
+        ChildRef((1 << Self::KIND_SHIFT) | ((count as u64) << 32) | first as u64)
+    }
+    pub fn link(tile: u32, node: u32) -> ChildRef {
+        debug_assert!(node < (1 << 30));
+        ChildRef((2 << Self::KIND_SHIFT) | ((node as u64) << 32) | tile as u64)
+    }
+    pub fn part(part: u32) -> ChildRef {
+        ChildRef((3 << Self::KIND_SHIFT) | part as u64)
+    }
+
+    #[inline(always)]
+    pub fn decode(self) -> Child {
+        if self.0 == u64::MAX {
+            return Child::Empty;
+        }
+        let lo = self.0 as u32;
+        match self.0 >> Self::KIND_SHIFT {
+            0 => Child::Inner(lo),
+            1 => Child::Leaf { first: lo, count: ((self.0 >> 32) & 0xff) as u32 },
+            2 => Child::Link { tile: lo, node: ((self.0 >> 32) & 0x3fff_ffff) as u32 },
+            _ => Child::Part(lo),
+        }
+    }
+}
+
+/// One triangle as stored in a tile: its three corners. 36 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct Tri {
+    pub v: [[f32; 3]; 3],
+}
+const _: () = assert!(std::mem::size_of::<Tri>() == 36);
+
+/// A part directory entry: one bottom-level BVH over a spatially coherent set of triangles.
+/// 128 bytes.
+///
+/// A part's triangles are numbered `0..tri_count` in tile order (tile `first_tile` first,
+/// triangles in each tile in order); attribute arrays use the same numbering. Attribute
+/// offsets are zero where the part has no such attribute.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct PartEntry {
+    pub bounds: Aabb,
+    pub tri_count: u32,
+    pub first_tile: u32,
+    pub tile_count: u32,
+    pub root_tile: u32,
+    pub root_node: u32,
+    /// Depth of the part's tree (a single leaf node = 1).
+    pub depth: u32,
+    /// Global number of the part's first triangle (parts number triangles consecutively).
+    pub first_prim: u64,
+    pub node_count: u64,
+    /// Bytes of the part's tiles, padding included.
+    pub tile_bytes: u64,
+    /// Offset of `tri_count` [`PackedNormals`], or 0.
+    pub normals_off: u64,
+    /// Offset of `tri_count` `[[f32; 2]; 3]` texture coordinates, or 0.
+    pub uvs_off: u64,
+    /// Offset of `tri_count` `[[u8; 4]; 3]` RGBA colours (linear, 0..255), or 0.
+    pub colors_off: u64,
+    /// Offset of `tri_count` `u32` material ids (`u32::MAX`: none), or 0.
+    pub materials_off: u64,
+    pub reserved: [u64; 3],
+}
+const _: () = assert!(std::mem::size_of::<PartEntry>() == 128);
+
+/// A tile directory entry. 40 bytes.
+///
+/// A tile is the unit of paging: a page-aligned block holding `node_count` [`Node4`]s and
+/// then `tri_count` [`Tri`]s (`bytes = 128 * node_count + 36 * tri_count`). Its nodes refer
+/// to each other by index, to its own triangles, and to other tiles through links.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct TileEntry {
+    pub offset: u64,
+    pub bytes: u32,
+    pub node_count: u32,
+    pub tri_count: u32,
+    pub part: u32,
+    /// Number (within the part) of the tile's first triangle.
+    pub first_tri: u32,
+    pub reserved: u32,
+    /// XXH3-64 of the tile's `bytes` bytes.
+    pub checksum: u64,
+}
+const _: () = assert!(std::mem::size_of::<TileEntry>() == 40);
+
+/// Three vertex normals, each octahedron-encoded into two snorm16 (x in the low half). 12 bytes.
+/// A zero word means "no normal here: use the geometric one".
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct PackedNormals(pub [u32; 3]);
+const _: () = assert!(std::mem::size_of::<PackedNormals>() == 12);
+
+/// A material table entry. 64 bytes; names and texture paths are UTF-8 in the bytes that
+/// follow the `material_count` records (offsets relative to the end of the records).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct MaterialRecord {
+    pub diffuse: [f32; 3],
+    pub specular: [f32; 3],
+    pub shininess: f32,
+    pub opacity: f32,
+    pub metallic: f32,
+    pub roughness: f32,
+    /// `MAT_HAS_*` bits: which of the fields above the input gave.
+    pub flags: u32,
+    pub name_off: u32,
+    pub name_len: u32,
+    pub texture_off: u32,
+    pub texture_len: u32,
+    pub reserved: u32,
+}
+const _: () = assert!(std::mem::size_of::<MaterialRecord>() == 64);
+
+pub const MAT_HAS_DIFFUSE: u32 = 1;
+pub const MAT_HAS_SPECULAR: u32 = 2;
+pub const MAT_HAS_SHININESS: u32 = 4;
+pub const MAT_HAS_OPACITY: u32 = 8;
+pub const MAT_HAS_METALLIC: u32 = 16;
+pub const MAT_HAS_ROUGHNESS: u32 = 32;
+pub const MAT_HAS_TEXTURE: u32 = 64;
+
+/// Encodes a unit vector into the octahedral snorm16x2 word of [`PackedNormals`]
+/// (never returns 0 for a valid vector, 0 stands for "none").
+pub fn encode_normal(n: [f32; 3]) -> u32 {
+    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
+    if !(l1 > 0.0) || !l1.is_finite() {
+        return 0;
+    }
+    let (mut x, mut y) = (n[0] / l1, n[1] / l1);
+    if n[2] < 0.0 {
+        let (ox, oy) = (x, y);
+        x = (1.0 - oy.abs()) * if ox >= 0.0 { 1.0 } else { -1.0 };
+        y = (1.0 - ox.abs()) * if oy >= 0.0 { 1.0 } else { -1.0 };
+    }
+    let q = |v: f32| ((v.clamp(-1.0, 1.0) * 32767.0).round() as i16) as u16 as u32;
+    let w = q(x) | (q(y) << 16);
+    if w == 0 {
+        // (0, 0) is +z; nudge so that 0 stays "none".
+        1
+    } else {
+        w
+    }
+}
+
+/// Decodes a [`PackedNormals`] word; `None` for 0.
+pub fn decode_normal(w: u32) -> Option<[f32; 3]> {
+    if w == 0 {
+        return None;
+    }
+    let x = (w as u16 as i16) as f32 / 32767.0;
+    let y = ((w >> 16) as u16 as i16) as f32 / 32767.0;
+    let z = 1.0 - x.abs() - y.abs();
+    let (x, y) = if z < 0.0 {
+        (
+            (1.0 - y.abs()) * if x >= 0.0 { 1.0 } else { -1.0 },
+            (1.0 - x.abs()) * if y >= 0.0 { 1.0 } else { -1.0 },
+        )
+    } else {
+        (x, y)
+    };
+    let l = (x * x + y * y + z * z).sqrt();
+    Some([x / l, y / l, z / l])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn child_refs_round_trip() {
+        for c in [
+            Child::Inner(0),
+            Child::Inner(u32::MAX),
+            Child::Leaf { first: 123_456, count: 1 },
+            Child::Leaf { first: u32::MAX, count: 255 },
+            Child::Link { tile: 77, node: (1 << 30) - 1 },
+            Child::Part(9),
+        ] {
+            let r = match c {
+                Child::Inner(n) => ChildRef::inner(n),
+                Child::Leaf { first, count } => ChildRef::leaf(first, count),
+                Child::Link { tile, node } => ChildRef::link(tile, node),
+                Child::Part(p) => ChildRef::part(p),
+                Child::Empty => ChildRef::EMPTY,
+            };
+            assert_eq!(r.decode(), c);
+        }
+        assert_eq!(ChildRef::EMPTY.decode(), Child::Empty);
+    }
+
+    #[test]
+    fn normals_round_trip() {
+        for n in [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.6, -0.8, 0.0], [0.267, 0.535, -0.802]] {
+            let d = decode_normal(encode_normal(n)).unwrap();
+            for k in 0..3 {
+                assert!((d[k] - n[k]).abs() < 1e-3, "{n:?} -> {d:?}");
+            }
+        }
+        assert_eq!(decode_normal(encode_normal([0.0; 3])), None);
+    }
+}

@@ -1,0 +1,316 @@
+//! Opening a scene file: map it, check the header and every table, and hand out typed
+//! views. Tiles are checked lazily, the first time traversal enters them (checksum and
+//! every reference in range), so opening a file of any size reads only its tables.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::Mutex;
+
+use memmap2::Mmap;
+
+use crate::error::{SceneError, SceneErrorKind};
+use crate::format::*;
+use crate::writer::{decode_materials, MaterialDesc};
+
+const TILE_UNCHECKED: u8 = 0;
+const TILE_OK: u8 = 1;
+const TILE_CORRUPT: u8 = 2;
+
+/// An open, checked, memory-mapped scene file.
+pub struct Scene {
+    path: PathBuf,
+    map: Mmap,
+    header: Header,
+    tile_state: Vec<AtomicU8>,
+    first_error: Mutex<Option<SceneError>>,
+    materials: Vec<MaterialDesc>,
+}
+
+/// The nodes and triangles of one tile.
+#[derive(Clone, Copy)]
+pub struct Tile<'a> {
+    pub nodes: &'a [Node4],
+    pub tris: &'a [Tri],
+}
+
+fn range(off: u64, len: u64, file: u64) -> Option<std::ops::Range<usize>> {
+    let end = off.checked_add(len)?;
+    (end <= file).then_some(off as usize..end as usize)
+}
+
+impl Scene {
+    /// Opens and checks `path`. Every fault is a [`SceneError`] naming the file and the fault.
+    pub fn open(path: &Path) -> Result<Scene, SceneError> {
+        let file = File::open(path).map_err(|e| SceneError::io(path, "open", &e))?;
+        let len = file.metadata().map_err(|e| SceneError::io(path, "stat", &e))?.len();
+        if len < 256 {
+            return Err(SceneError::new(
+                path,
+                if len >= 8 { SceneErrorKind::Truncated } else { SceneErrorKind::NotAScene },
+                format!("too short to be a scene file ({len} bytes)"),
+            ));
+        }
+        // SAFETY: the map is read-only and private to this process. The contract (stated in
+        // the crate docs) is that nobody truncates or rewrites a scene file while it is open:
+        // megaray itself only ever replaces scene files by rename, which leaves this mapping
+        // intact. Every view handed out is bounds-checked against the mapped length.
+        let map = unsafe { Mmap::map(&file) }.map_err(|e| SceneError::io(path, "map", &e))?;
+        let header: Header = bytemuck::pod_read_unaligned(&map[..256]);
+        if header.magic != MAGIC {
+            return Err(SceneError::new(path, SceneErrorKind::NotAScene, "not a megaray scene file (bad magic number)"));
+        }
+        if header.version != VERSION {
+            return Err(SceneError::new(
+                path,
+                SceneErrorKind::Version,
+                format!("scene format version {}, this megaray reads version {VERSION} (rebuild the scene)", header.version),
+            ));
+        }
+        let sum = xxhash_rust::xxh3::xxh3_64(&map[..248]);
+        if header.header_bytes != 256 || sum != header.header_checksum {
+            return Err(SceneError::corrupt(path, "header checksum mismatch (the header is damaged)"));
+        }
+        if header.file_bytes != len {
+            return Err(SceneError::new(
+                path,
+                SceneErrorKind::Truncated,
+                format!("header says {} bytes but the file has {len} (truncated or appended to)", header.file_bytes),
+            ));
+        }
+        let bad = |what: &str| SceneError::corrupt(path, what.to_string());
+        let top = range(header.top_nodes_off, header.top_node_count as u64 * 128, len)
+            .filter(|_| header.top_nodes_off % 64 == 0 && header.top_node_count > 0)
+            .ok_or_else(|| bad("top-level tree lies outside the file"))?;
+        let parts = range(header.parts_off, header.part_count as u64 * 128, len)
+            .filter(|_| header.parts_off % 8 == 0 && header.part_count > 0)
+            .ok_or_else(|| bad("part directory lies outside the file"))?;
+        let tiles = range(header.tiles_off, header.tile_count as u64 * 40, len)
+            .filter(|_| header.tiles_off % 8 == 0)
+            .ok_or_else(|| bad("tile directory lies outside the file"))?;
+        let mats = range(header.materials_off, header.materials_bytes, len)
+            .ok_or_else(|| bad("material table lies outside the file"))?;
+        let mut meta = xxhash_rust::xxh3::Xxh3::new();
+        for r in [&top, &parts, &tiles, &mats] {
+            meta.update(&map[r.clone()]);
+        }
+        if meta.digest() != header.meta_checksum {
+            return Err(bad("table checksum mismatch (tree, part, tile or material table damaged)"));
+        }
+        let materials = decode_materials(&map[mats], header.material_count)
+            .ok_or_else(|| bad("material table is malformed"))?;
+        let scene = Scene {
+            path: path.to_path_buf(),
+            tile_state: (0..header.tile_count).map(|_| AtomicU8::new(TILE_UNCHECKED)).collect(),
+            first_error: Mutex::new(None),
+            materials,
+            header,
+            map,
+        };
+        scene.check_tables()?;
+        Ok(scene)
+    }
+
+    fn check_tables(&self) -> Result<(), SceneError> {
+        let h = &self.header;
+        let bad = |what: String| SceneError::corrupt(&self.path, what);
+        let len = self.map.len() as u64;
+        for (i, n) in self.top_nodes().iter().enumerate() {
+            for c in n.child {
+                match ChildRef(c).decode() {
+                    Child::Empty => {}
+                    Child::Inner(k) if k < h.top_node_count && k as usize > i => {}
+                    Child::Part(p) if p < h.part_count => {}
+                    other => return Err(bad(format!("top-level node {i}: bad child {other:?}"))),
+                }
+            }
+        }
+        let tiles = self.tiles();
+        let mut tri_total = 0u64;
+        for (i, p) in self.parts().iter().enumerate() {
+            let tiles_end = p.first_tile as u64 + p.tile_count as u64;
+            if tiles_end > h.tile_count as u64
+                || p.root_tile < p.first_tile
+                || p.root_tile as u64 >= tiles_end
+                || p.root_node >= tiles[p.root_tile as usize].node_count
+                || p.first_prim != tri_total
+            {
+                return Err(bad(format!("part {i}: tile range or root out of bounds")));
+            }
+            let n = p.tri_count as u64;
+            for (off, size) in [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)] {
+                if off != 0 && (off % 4 != 0 || range(off, n * size, len).is_none()) {
+                    return Err(bad(format!("part {i}: attribute array lies outside the file")));
+                }
+            }
+            tri_total += n;
+        }
+        if tri_total != h.tri_count {
+            return Err(bad(format!("parts hold {tri_total} triangles, header says {}", h.tri_count)));
+        }
+        for (i, t) in tiles.iter().enumerate() {
+            let expect = t.node_count as u64 * 128 + t.tri_count as u64 * 36;
+            let part = self.parts().get(t.part as usize);
+            if t.offset % PAGE != 0
+                || t.bytes as u64 != expect
+                || range(t.offset, expect, len).is_none()
+                || part.is_none_or(|p| {
+                    (i as u32) < p.first_tile
+                        || i as u64 >= p.first_tile as u64 + p.tile_count as u64
+                        || t.first_tri as u64 + t.tri_count as u64 > p.tri_count as u64
+                })
+            {
+                return Err(bad(format!("tile {i}: directory entry out of bounds")));
+            }
+        }
+        Ok(())
+    }
+
+    /// The file this scene was opened from.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The whole mapped file.
+    pub fn bytes(&self) -> &[u8] {
+        &self.map
+    }
+
+    /// The top-level tree; node 0 is the root.
+    pub fn top_nodes(&self) -> &[Node4] {
+        let off = self.header.top_nodes_off as usize;
+        bytemuck::cast_slice(&self.map[off..off + self.header.top_node_count as usize * 128])
+    }
+
+    pub fn parts(&self) -> &[PartEntry] {
+        let off = self.header.parts_off as usize;
+        bytemuck::cast_slice(&self.map[off..off + self.header.part_count as usize * 128])
+    }
+
+    pub fn tiles(&self) -> &[TileEntry] {
+        let off = self.header.tiles_off as usize;
+        bytemuck::cast_slice(&self.map[off..off + self.header.tile_count as usize * 40])
+    }
+
+    pub fn materials(&self) -> &[MaterialDesc] {
+        &self.materials
+    }
+
+    /// Tile `t`, checked on first use. `None` (and the fault recorded, see
+    /// [`Scene::first_error`]) when it is corrupt; traversal then skips it.
+    #[inline]
+    pub fn tile(&self, t: u32) -> Option<Tile<'_>> {
+        let state = self.tile_state.get(t as usize)?;
+        match state.load(Ordering::Acquire) {
+            TILE_OK => Some(self.tile_unchecked_view(t)),
+            TILE_CORRUPT => None,
+            _ => match self.check_tile(t) {
+                Ok(()) => {
+                    state.store(TILE_OK, Ordering::Release);
+                    Some(self.tile_unchecked_view(t))
+                }
+                Err(e) => {
+                    state.store(TILE_CORRUPT, Ordering::Release);
+                    let mut slot = self.first_error.lock().unwrap_or_else(|p| p.into_inner());
+                    slot.get_or_insert(e);
+                    None
+                }
+            },
+        }
+    }
+
+    fn tile_unchecked_view(&self, t: u32) -> Tile<'_> {
+        let e = &self.tiles()[t as usize];
+        let nodes_end = e.offset as usize + e.node_count as usize * 128;
+        let tris_end = nodes_end + e.tri_count as usize * 36;
+        Tile {
+            nodes: bytemuck::cast_slice(&self.map[e.offset as usize..nodes_end]),
+            tris: bytemuck::cast_slice(&self.map[nodes_end..tris_end]),
+        }
+    }
+
+    /// Checks tile `t` now: its checksum and that every reference in it is in range.
+    pub fn check_tile(&self, t: u32) -> Result<(), SceneError> {
+        let tiles = self.tiles();
+        let e = tiles.get(t as usize).ok_or_else(|| SceneError::corrupt(&self.path, format!("no tile {t}")))?;
+        let corrupt = |what: String| SceneError::new(&self.path, SceneErrorKind::CorruptTile(t), format!("tile {t}: {what}"));
+        let bytes = &self.map[e.offset as usize..e.offset as usize + e.bytes as usize];
+        if xxhash_rust::xxh3::xxh3_64(bytes) != e.checksum {
+            return Err(corrupt("checksum mismatch (the file is damaged)".into()));
+        }
+        let v = self.tile_unchecked_view(t);
+        for (i, n) in v.nodes.iter().enumerate() {
+            for c in n.child {
+                let ok = match ChildRef(c).decode() {
+                    Child::Empty => true,
+                    Child::Inner(k) => (k as usize) < v.nodes.len() && k as usize > i,
+                    Child::Leaf { first, count } => count > 0 && first as u64 + count as u64 <= v.tris.len() as u64,
+                    Child::Link { tile, node } => tiles
+                        .get(tile as usize)
+                        .is_some_and(|o| o.part == e.part && tile != t && node < o.node_count),
+                    Child::Part(_) => false,
+                };
+                if !ok {
+                    return Err(corrupt(format!("node {i} has an out-of-range child reference")));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks every tile (reads the whole file). Returns the first fault.
+    pub fn verify_all(&self) -> Result<(), SceneError> {
+        for t in 0..self.header.tile_count {
+            self.check_tile(t)?;
+        }
+        Ok(())
+    }
+
+    /// The first fault met in a tile since opening, if any. Renderers check this after a
+    /// frame and report it: a corrupt tile never shows as garbage.
+    pub fn first_error(&self) -> Option<SceneError> {
+        self.first_error.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    fn attr<T: bytemuck::Pod>(&self, off: u64, prim: u32) -> T {
+        let size = std::mem::size_of::<T>();
+        let at = off as usize + prim as usize * size;
+        bytemuck::pod_read_unaligned(&self.map[at..at + size])
+    }
+
+    /// The vertex normals of triangle `prim` of `part`, if the part has normals.
+    pub fn normals(&self, part: u32, prim: u32) -> Option<[[f32; 3]; 3]> {
+        let p = self.parts().get(part as usize)?;
+        if p.normals_off == 0 || prim >= p.tri_count {
+            return None;
+        }
+        let w: PackedNormals = self.attr(p.normals_off, prim);
+        Some([decode_normal(w.0[0])?, decode_normal(w.0[1])?, decode_normal(w.0[2])?])
+    }
+
+    /// The texture coordinates of triangle `prim` of `part`, if any.
+    pub fn uvs(&self, part: u32, prim: u32) -> Option<[[f32; 2]; 3]> {
+        let p = self.parts().get(part as usize)?;
+        (p.uvs_off != 0 && prim < p.tri_count).then(|| self.attr(p.uvs_off, prim))
+    }
+
+    /// The RGBA8 vertex colours of triangle `prim` of `part`, if any.
+    pub fn colors(&self, part: u32, prim: u32) -> Option<[[u8; 4]; 3]> {
+        let p = self.parts().get(part as usize)?;
+        (p.colors_off != 0 && prim < p.tri_count).then(|| self.attr(p.colors_off, prim))
+    }
+
+    /// The material of triangle `prim` of `part`, if any.
+    pub fn material(&self, part: u32, prim: u32) -> Option<&MaterialDesc> {
+        let p = self.parts().get(part as usize)?;
+        if p.materials_off == 0 || prim >= p.tri_count {
+            return None;
+        }
+        let id: u32 = self.attr(p.materials_off, prim);
+        self.materials.get(id as usize)
+    }
+}

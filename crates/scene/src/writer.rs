@@ -1,0 +1,359 @@
+//! Writing a scene file: header and top-level tree first, parts appended as they are
+//! built (from any thread, through a mutex the caller holds), tables and header at the end,
+//! then an atomic rename into place. A writer dropped before [`SceneWriter::finish`] removes
+//! its temporary file, so no half-written scene ever carries the output's name.
+
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::{Path, PathBuf};
+
+use megaray_base::Aabb;
+
+use crate::error::SceneError;
+use crate::format::*;
+
+/// One tile as the builder produces it.
+#[derive(Clone, Debug, Default)]
+pub struct TileBlob {
+    pub nodes: Vec<Node4>,
+    pub tris: Vec<Tri>,
+}
+
+impl TileBlob {
+    /// Bytes of the tile's payload (nodes then triangles), without page padding.
+    pub fn bytes(&self) -> u64 {
+        (self.nodes.len() * 128 + self.tris.len() * 36) as u64
+    }
+}
+
+/// One part as the builder produces it. Links in its nodes name tiles by their index
+/// in `tiles` (the writer turns them into file-wide tile numbers).
+#[derive(Clone, Debug, Default)]
+pub struct PartBlob {
+    pub bounds: Aabb,
+    pub depth: u32,
+    pub tiles: Vec<TileBlob>,
+    pub root_tile: u32,
+    pub root_node: u32,
+    pub normals: Option<Vec<PackedNormals>>,
+    pub uvs: Option<Vec<[[f32; 2]; 3]>>,
+    pub colors: Option<Vec<[[u8; 4]; 3]>>,
+    pub materials: Option<Vec<u32>>,
+}
+
+impl PartBlob {
+    pub fn tri_count(&self) -> u64 {
+        self.tiles.iter().map(|t| t.tris.len() as u64).sum()
+    }
+}
+
+/// A material as it goes into the table.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MaterialDesc {
+    pub name: String,
+    pub diffuse: Option<[f32; 3]>,
+    pub specular: Option<[f32; 3]>,
+    pub shininess: Option<f32>,
+    pub opacity: Option<f32>,
+    pub metallic: Option<f32>,
+    pub roughness: Option<f32>,
+    pub texture: Option<String>,
+}
+
+/// Streams a scene file to disk. See the module documentation.
+pub struct SceneWriter {
+    path: PathBuf,
+    tmp: PathBuf,
+    file: Option<File>,
+    cursor: u64,
+    part_count: u32,
+    parts: Vec<Option<PartEntry>>,
+    tiles: Vec<TileEntry>,
+    tri_count: u64,
+    tile_target: u32,
+    top_nodes: Vec<Node4>,
+    top_depth: u32,
+    top_off: u64,
+    parts_off: u64,
+    attr_flags: u32,
+}
+
+fn page_up(x: u64) -> u64 {
+    x.div_ceil(PAGE) * PAGE
+}
+
+impl SceneWriter {
+    /// Starts `path` (written as a temporary file beside it) with the top-level tree, whose
+    /// `Part` references name the `part_count` parts to come.
+    pub fn create(
+        path: &Path,
+        top_nodes: Vec<Node4>,
+        top_depth: u32,
+        part_count: u32,
+        tile_target: u32,
+    ) -> Result<SceneWriter, SceneError> {
+        let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+        let file = File::create(&tmp).map_err(|e| SceneError::io(path, "create", &e))?;
+        let top_off = HEADER_PAGE;
+        let parts_off = top_off + (top_nodes.len() * 128) as u64;
+        let cursor = page_up(parts_off + part_count as u64 * 128);
+        let mut w = SceneWriter {
+            path: path.to_path_buf(),
+            tmp,
+            file: Some(file),
+            cursor,
+            part_count,
+            parts: vec![None; part_count as usize],
+            tiles: Vec::new(),
+            tri_count: 0,
+            tile_target,
+            top_nodes,
+            top_depth,
+            top_off,
+            parts_off,
+            attr_flags: 0,
+        };
+        w.write_at(bytemuck::cast_slice(&w.top_nodes.clone()), top_off)?;
+        Ok(w)
+    }
+
+    fn write_at(&mut self, bytes: &[u8], off: u64) -> Result<(), SceneError> {
+        let f = self.file.as_ref().expect("writer used after finish");
+        f.write_all_at(bytes, off).map_err(|e| SceneError::io(&self.path, "write", &e))
+    }
+
+    /// Appends part `index`: its tiles (page aligned), then its attribute arrays.
+    pub fn append_part(&mut self, index: u32, part: PartBlob) -> Result<(), SceneError> {
+        assert!(index < self.part_count && self.parts[index as usize].is_none());
+        let first_tile = self.tiles.len() as u32;
+        let tri_count = part.tri_count();
+        let mut first_tri = 0u32;
+        let start = self.cursor;
+        let mut node_count = 0u64;
+        let mut buf: Vec<u8> = Vec::new();
+        for tile in &part.tiles {
+            buf.clear();
+            for n in &tile.nodes {
+                let mut n = *n;
+                for c in n.child.iter_mut() {
+                    if let Child::Link { tile, node } = ChildRef(*c).decode() {
+                        *c = ChildRef::link(tile + first_tile, node).0;
+                    }
+                }
+                buf.extend_from_slice(bytemuck::bytes_of(&n));
+            }
+            buf.extend_from_slice(bytemuck::cast_slice(&tile.tris));
+            let entry = TileEntry {
+                offset: self.cursor,
+                bytes: buf.len() as u32,
+                node_count: tile.nodes.len() as u32,
+                tri_count: tile.tris.len() as u32,
+                part: index,
+                first_tri,
+                reserved: 0,
+                checksum: xxhash_rust::xxh3::xxh3_64(&buf),
+            };
+            node_count += tile.nodes.len() as u64;
+            first_tri += tile.tris.len() as u32;
+            let len = buf.len() as u64;
+            buf.resize(page_up(len) as usize, 0);
+            let off = self.cursor;
+            self.write_at(&buf, off)?;
+            self.cursor += buf.len() as u64;
+            self.tiles.push(entry);
+        }
+        let tile_bytes = self.cursor - start;
+        let mut entry = PartEntry {
+            bounds: part.bounds,
+            tri_count: tri_count as u32,
+            first_tile,
+            tile_count: part.tiles.len() as u32,
+            root_tile: first_tile + part.root_tile,
+            root_node: part.root_node,
+            depth: part.depth,
+            first_prim: self.tri_count,
+            node_count,
+            tile_bytes,
+            normals_off: 0,
+            uvs_off: 0,
+            colors_off: 0,
+            materials_off: 0,
+            reserved: [0; 3],
+        };
+        if let Some(a) = &part.normals {
+            entry.normals_off = self.append_attr(bytemuck::cast_slice(a))?;
+            self.attr_flags |= ATTR_NORMAL;
+        }
+        if let Some(a) = &part.uvs {
+            entry.uvs_off = self.append_attr(bytemuck::cast_slice(a))?;
+            self.attr_flags |= ATTR_UV;
+        }
+        if let Some(a) = &part.colors {
+            entry.colors_off = self.append_attr(bytemuck::cast_slice(a))?;
+            self.attr_flags |= ATTR_COLOR;
+        }
+        if let Some(a) = &part.materials {
+            entry.materials_off = self.append_attr(bytemuck::cast_slice(a))?;
+            self.attr_flags |= ATTR_MATERIAL;
+        }
+        self.tri_count += tri_count;
+        self.parts[index as usize] = Some(entry);
+        Ok(())
+    }
+
+    fn append_attr(&mut self, bytes: &[u8]) -> Result<u64, SceneError> {
+        let off = self.cursor;
+        self.write_at(bytes, off)?;
+        self.cursor = page_up(off + bytes.len() as u64);
+        Ok(off)
+    }
+
+    /// Writes the tables and the header, syncs, and renames the file into place.
+    pub fn finish(
+        mut self,
+        bounds: Aabb,
+        degenerate_dropped: u64,
+        materials: &[MaterialDesc],
+    ) -> Result<u64, SceneError> {
+        let mut parts = Vec::with_capacity(self.parts.len());
+        for (i, p) in self.parts.iter().enumerate() {
+            match p {
+                Some(p) => parts.push(*p),
+                None => panic!("part {i} was never appended"),
+            }
+        }
+        let tiles_off = self.cursor;
+        let tiles = std::mem::take(&mut self.tiles);
+        self.write_at(bytemuck::cast_slice(&tiles), tiles_off)?;
+        let materials_off = page_up(tiles_off + (tiles.len() * 40) as u64);
+        let mat_bytes = encode_materials(materials);
+        self.write_at(&mat_bytes, materials_off)?;
+        let file_bytes = page_up(materials_off + mat_bytes.len() as u64);
+        let parts_off = self.parts_off;
+        self.write_at(bytemuck::cast_slice(&parts), parts_off)?;
+
+        let mut meta = Vec::new();
+        meta.extend_from_slice(bytemuck::cast_slice(&self.top_nodes));
+        meta.extend_from_slice(bytemuck::cast_slice(&parts));
+        meta.extend_from_slice(bytemuck::cast_slice(&tiles));
+        meta.extend_from_slice(&mat_bytes);
+        let mut h = Header {
+            magic: MAGIC,
+            version: VERSION,
+            header_bytes: 256,
+            file_bytes,
+            tri_count: self.tri_count,
+            degenerate_dropped,
+            bounds,
+            part_count: self.part_count,
+            tile_count: tiles.len() as u32,
+            tile_target: self.tile_target,
+            attr_flags: self.attr_flags,
+            top_nodes_off: self.top_off,
+            top_node_count: self.top_nodes.len() as u32,
+            top_depth: self.top_depth,
+            parts_off,
+            tiles_off,
+            materials_off,
+            materials_bytes: mat_bytes.len() as u64,
+            material_count: materials.len() as u32,
+            reserved0: 0,
+            meta_checksum: xxhash_rust::xxh3::xxh3_64(&meta),
+            reserved: [0; 13],
+            header_checksum: 0,
+        };
+        h.header_checksum = xxhash_rust::xxh3::xxh3_64(&bytemuck::bytes_of(&h)[..248]);
+        self.write_at(bytemuck::bytes_of(&h), 0)?;
+        let file = self.file.take().expect("finish called twice");
+        file.set_len(file_bytes).map_err(|e| SceneError::io(&self.path, "write", &e))?;
+        file.sync_all().map_err(|e| SceneError::io(&self.path, "sync", &e))?;
+        drop(file);
+        std::fs::rename(&self.tmp, &self.path).map_err(|e| SceneError::io(&self.path, "rename into place", &e))?;
+        Ok(file_bytes)
+    }
+}
+
+impl Drop for SceneWriter {
+    fn drop(&mut self) {
+        if self.file.take().is_some() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+fn encode_materials(mats: &[MaterialDesc]) -> Vec<u8> {
+    let mut recs = Vec::with_capacity(mats.len());
+    let mut strings: Vec<u8> = Vec::new();
+    for m in mats {
+        let mut r = MaterialRecord {
+            diffuse: m.diffuse.unwrap_or([0.8; 3]),
+            specular: m.specular.unwrap_or([0.0; 3]),
+            shininess: m.shininess.unwrap_or(0.0),
+            opacity: m.opacity.unwrap_or(1.0),
+            metallic: m.metallic.unwrap_or(0.0),
+            roughness: m.roughness.unwrap_or(1.0),
+            flags: 0,
+            name_off: strings.len() as u32,
+            name_len: m.name.len() as u32,
+            texture_off: 0,
+            texture_len: 0,
+            reserved: 0,
+        };
+        strings.extend_from_slice(m.name.as_bytes());
+        let bits = [
+            (m.diffuse.is_some(), MAT_HAS_DIFFUSE),
+            (m.specular.is_some(), MAT_HAS_SPECULAR),
+            (m.shininess.is_some(), MAT_HAS_SHININESS),
+            (m.opacity.is_some(), MAT_HAS_OPACITY),
+            (m.metallic.is_some(), MAT_HAS_METALLIC),
+            (m.roughness.is_some(), MAT_HAS_ROUGHNESS),
+            (m.texture.is_some(), MAT_HAS_TEXTURE),
+        ];
+        for (has, bit) in bits {
+            if has {
+                r.flags |= bit;
+            }
+        }
+        if let Some(t) = &m.texture {
+            r.texture_off = strings.len() as u32;
+            r.texture_len = t.len() as u32;
+            strings.extend_from_slice(t.as_bytes());
+        }
+        recs.push(r);
+    }
+    let mut out = bytemuck::cast_slice::<MaterialRecord, u8>(&recs).to_vec();
+    out.extend_from_slice(&strings);
+    out
+}
+
+/// Reads a material table back (used by the reader; kept beside the encoder).
+pub(crate) fn decode_materials(bytes: &[u8], count: u32) -> Option<Vec<MaterialDesc>> {
+    let rec_bytes = (count as usize).checked_mul(64)?;
+    if rec_bytes > bytes.len() {
+        return None;
+    }
+    let (recs, strings) = bytes.split_at(rec_bytes);
+    let recs: Vec<MaterialRecord> = recs.chunks_exact(64).map(bytemuck::pod_read_unaligned).collect();
+    let s = |off: u32, len: u32| -> Option<String> {
+        let end = (off as usize).checked_add(len as usize)?;
+        Some(String::from_utf8_lossy(strings.get(off as usize..end)?).into_owned())
+    };
+    let mut out = Vec::with_capacity(recs.len());
+    for r in recs {
+        let f = |bit: u32| r.flags & bit != 0;
+        out.push(MaterialDesc {
+            name: s(r.name_off, r.name_len)?,
+            diffuse: f(MAT_HAS_DIFFUSE).then_some(r.diffuse),
+            specular: f(MAT_HAS_SPECULAR).then_some(r.specular),
+            shininess: f(MAT_HAS_SHININESS).then_some(r.shininess),
+            opacity: f(MAT_HAS_OPACITY).then_some(r.opacity),
+            metallic: f(MAT_HAS_METALLIC).then_some(r.metallic),
+            roughness: f(MAT_HAS_ROUGHNESS).then_some(r.roughness),
+            texture: if f(MAT_HAS_TEXTURE) { Some(s(r.texture_off, r.texture_len)?) } else { None },
+        });
+    }
+    Some(out)
+}
+
