@@ -47,18 +47,14 @@ impl Aabb {
 
     #[inline]
     pub fn grow_point(&mut self, p: [f32; 3]) {
-        for k in 0..3 {
-            self.min[k] = self.min[k].min(p[k]);
-            self.max[k] = self.max[k].max(p[k]);
-        }
+        self.min = [self.min[0].min(p[0]), self.min[1].min(p[1]), self.min[2].min(p[2])];
+        self.max = [self.max[0].max(p[0]), self.max[1].max(p[1]), self.max[2].max(p[2])];
     }
 
     #[inline]
     pub fn grow(&mut self, o: &Aabb) {
-        for k in 0..3 {
-            self.min[k] = self.min[k].min(o.min[k]);
-            self.max[k] = self.max[k].max(o.max[k]);
-        }
+        self.min = [self.min[0].min(o.min[0]), self.min[1].min(o.min[1]), self.min[2].min(o.min[2])];
+        self.max = [self.max[0].max(o.max[0]), self.max[1].max(o.max[1]), self.max[2].max(o.max[2])];
     }
 
     #[inline]

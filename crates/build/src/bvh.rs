@@ -91,7 +91,7 @@ impl Ctx<'_> {
         let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, split bin (left = bins < split)
         let ext = cb.extent();
         for axis in 0..3 {
-            if !(ext[axis] > 0.0) {
+            if ext[axis].is_nan() || ext[axis] <= 0.0 {
                 continue;
             }
             let lo = cb.min[axis];

@@ -172,6 +172,8 @@ pub fn build_scene(
         .map_err(|e| BuildError::io(out_dir, "create a temporary folder in", e))?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads.max(1))
+        // The in-core builder recurses once per tree level; unbalanced inputs make deep trees.
+        .stack_size(256 << 20)
         .build()
         .map_err(|e| BuildError::Invalid(format!("cannot start threads: {e}")))?;
 

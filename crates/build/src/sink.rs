@@ -51,7 +51,7 @@ impl<'a> BuildSink<'a> {
 impl TriangleSink for BuildSink<'_> {
     fn triangle(&mut self, p: [[f32; 3]; 3], attr: &TriAttr) -> Result<(), ImportError> {
         self.seen += 1;
-        if self.seen % 65536 == 0 && self.opts.cancel.load(std::sync::atomic::Ordering::Relaxed) {
+        if self.seen.is_multiple_of(65536) && self.opts.cancel.load(std::sync::atomic::Ordering::Relaxed) {
             self.error = Some(BuildError::Cancelled);
             return Err(ImportError::new(Path::new("(build)"), None, "interrupted"));
         }

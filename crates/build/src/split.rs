@@ -160,7 +160,7 @@ fn route(
             let go_left = match plane {
                 Plane::Bin { axis, bin } => bins.bin_of(axis, c[axis]) < bin,
                 Plane::Mid { axis, at } => c[axis] < at,
-                Plane::Alternate => k % 2 == 0,
+                Plane::Alternate => k.is_multiple_of(2),
             };
             k += 1;
             if go_left {

@@ -57,7 +57,7 @@ impl Bins {
     pub fn bin_of(&self, axis: usize, c: f32) -> usize {
         let lo = self.range.min[axis];
         let ext = self.range.max[axis] - lo;
-        if !(ext > 0.0) {
+        if ext.is_nan() || ext <= 0.0 {
             return 0;
         }
         let b = ((c - lo) / ext * BINS as f32) as isize;
@@ -66,8 +66,8 @@ impl Bins {
 
     #[inline]
     pub fn add(&mut self, c: [f32; 3], b: &Aabb) {
-        for axis in 0..3 {
-            let i = self.bin_of(axis, c[axis]);
+        for (axis, &ca) in c.iter().enumerate() {
+            let i = self.bin_of(axis, ca);
             self.count[axis][i] += 1;
             self.bounds[axis][i].grow(b);
         }

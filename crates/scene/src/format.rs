@@ -288,7 +288,7 @@ pub const MAT_HAS_TEXTURE: u32 = 64;
 /// (never returns 0 for a valid vector, 0 stands for "none").
 pub fn encode_normal(n: [f32; 3]) -> u32 {
     let l1 = n[0].abs() + n[1].abs() + n[2].abs();
-    if !(l1 > 0.0) || !l1.is_finite() {
+    if l1.is_nan() || l1 <= 0.0 || !l1.is_finite() {
         return 0;
     }
     let (mut x, mut y) = (n[0] / l1, n[1] / l1);

@@ -80,13 +80,13 @@ impl Scene {
         }
         let bad = |what: &str| SceneError::corrupt(path, what.to_string());
         let top = range(header.top_nodes_off, header.top_node_count as u64 * 128, len)
-            .filter(|_| header.top_nodes_off % 64 == 0 && header.top_node_count > 0)
+            .filter(|_| header.top_nodes_off.is_multiple_of(64) && header.top_node_count > 0)
             .ok_or_else(|| bad("top-level tree lies outside the file"))?;
         let parts = range(header.parts_off, header.part_count as u64 * 128, len)
-            .filter(|_| header.parts_off % 8 == 0 && header.part_count > 0)
+            .filter(|_| header.parts_off.is_multiple_of(8) && header.part_count > 0)
             .ok_or_else(|| bad("part directory lies outside the file"))?;
         let tiles = range(header.tiles_off, header.tile_count as u64 * 40, len)
-            .filter(|_| header.tiles_off % 8 == 0)
+            .filter(|_| header.tiles_off.is_multiple_of(8))
             .ok_or_else(|| bad("tile directory lies outside the file"))?;
         let mats = range(header.materials_off, header.materials_bytes, len)
             .ok_or_else(|| bad("material table lies outside the file"))?;
@@ -139,7 +139,7 @@ impl Scene {
             }
             let n = p.tri_count as u64;
             for (off, size) in [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)] {
-                if off != 0 && (off % 4 != 0 || range(off, n * size, len).is_none()) {
+                if off != 0 && (!off.is_multiple_of(4) || range(off, n * size, len).is_none()) {
                     return Err(bad(format!("part {i}: attribute array lies outside the file")));
                 }
             }
@@ -151,7 +151,7 @@ impl Scene {
         for (i, t) in tiles.iter().enumerate() {
             let expect = t.node_count as u64 * 128 + t.tri_count as u64 * 36;
             let part = self.parts().get(t.part as usize);
-            if t.offset % PAGE != 0
+            if !t.offset.is_multiple_of(PAGE)
                 || t.bytes as u64 != expect
                 || range(t.offset, expect, len).is_none()
                 || part.is_none_or(|p| {
