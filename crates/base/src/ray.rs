@@ -38,7 +38,17 @@ pub fn intersect_triangle(ray: &Ray, tri: [Vec3; 3], t_max: f32) -> Option<TriHi
     let d = ray.dir;
     // Permute axes so that kz is the dominant direction axis.
     let ad = d.abs();
-    let kz = if ad.x > ad.y { if ad.x > ad.z { 0 } else { 2 } } else if ad.y > ad.z { 1 } else { 2 };
+    let kz = if ad.x > ad.y {
+        if ad.x > ad.z {
+            0
+        } else {
+            2
+        }
+    } else if ad.y > ad.z {
+        1
+    } else {
+        2
+    };
     let mut kx = (kz + 1) % 3;
     let mut ky = (kx + 1) % 3;
     if d[kz] < 0.0 {
@@ -63,8 +73,7 @@ pub fn intersect_triangle(ray: &Ray, tri: [Vec3; 3], t_max: f32) -> Option<TriHi
     let mut w = bx * ay - by * ax;
     if u == 0.0 || v == 0.0 || w == 0.0 {
         // Fall back to double precision on edges, as the paper does.
-        let (axd, ayd, bxd, byd, cxd, cyd) =
-            (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+        let (axd, ayd, bxd, byd, cxd, cyd) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
         u = (cxd * byd - cyd * bxd) as f32;
         v = (axd * cyd - ayd * cxd) as f32;
         w = (bxd * ayd - byd * axd) as f32;

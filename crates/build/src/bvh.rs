@@ -37,7 +37,10 @@ pub enum Kid {
     Empty,
     Inner(u32),
     /// Primitives `order[start..start + count]`.
-    Leaf { start: u32, count: u32 },
+    Leaf {
+        start: u32,
+        count: u32,
+    },
 }
 
 /// A build-layout 4-wide node.

@@ -67,10 +67,7 @@ impl TriangleSink for BuildSink<'_> {
             return Ok(());
         }
         let id = self.stream.count();
-        let r = self
-            .stream
-            .push(&StreamTri { v: p, reserved: 0, id })
-            .and_then(|_| self.attrs.push(attr));
+        let r = self.stream.push(&StreamTri { v: p, reserved: 0, id }).and_then(|_| self.attrs.push(attr));
         if let Err(e) = r {
             let msg = e.to_string();
             self.error = Some(e);

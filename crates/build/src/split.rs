@@ -59,10 +59,7 @@ pub fn split(
     let plane = choose(&s, &bins);
     let (l, r) = route(&s, plane, &bins, io, progress)?;
     std::fs::remove_file(&s.path).map_err(|e| BuildError::io(&s.path, "remove", e))?;
-    let (a, b) = rayon::join(
-        || split(l, limit, opts, io, progress),
-        || split(r, limit, opts, io, progress),
-    );
+    let (a, b) = rayon::join(|| split(l, limit, opts, io, progress), || split(r, limit, opts, io, progress));
     let mut a = a?;
     a.extend(b?);
     Ok(a)

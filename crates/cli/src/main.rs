@@ -81,4 +81,3 @@ fn one_line(e: &anyhow::Error) -> String {
     }
     s.replace('\n', " ")
 }
-

@@ -120,10 +120,7 @@ impl Node4 {
 
     /// The bounds of slot `i`.
     pub fn bounds(&self, i: usize) -> Aabb {
-        Aabb {
-            min: [self.lo_x[i], self.lo_y[i], self.lo_z[i]],
-            max: [self.hi_x[i], self.hi_y[i], self.hi_z[i]],
-        }
+        Aabb { min: [self.lo_x[i], self.lo_y[i], self.lo_z[i]], max: [self.hi_x[i], self.hi_y[i], self.hi_z[i]] }
     }
 }
 
@@ -316,10 +313,7 @@ pub fn decode_normal(w: u32) -> Option<[f32; 3]> {
     let y = ((w >> 16) as u16 as i16) as f32 / 32767.0;
     let z = 1.0 - x.abs() - y.abs();
     let (x, y) = if z < 0.0 {
-        (
-            (1.0 - y.abs()) * if x >= 0.0 { 1.0 } else { -1.0 },
-            (1.0 - x.abs()) * if y >= 0.0 { 1.0 } else { -1.0 },
-        )
+        ((1.0 - y.abs()) * if x >= 0.0 { 1.0 } else { -1.0 }, (1.0 - x.abs()) * if y >= 0.0 { 1.0 } else { -1.0 })
     } else {
         (x, y)
     };

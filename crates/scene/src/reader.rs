@@ -58,13 +58,20 @@ impl Scene {
         let map = unsafe { Mmap::map(&file) }.map_err(|e| SceneError::io(path, "map", &e))?;
         let header: Header = bytemuck::pod_read_unaligned(&map[..256]);
         if header.magic != MAGIC {
-            return Err(SceneError::new(path, SceneErrorKind::NotAScene, "not a megaray scene file (bad magic number)"));
+            return Err(SceneError::new(
+                path,
+                SceneErrorKind::NotAScene,
+                "not a megaray scene file (bad magic number)",
+            ));
         }
         if header.version != VERSION {
             return Err(SceneError::new(
                 path,
                 SceneErrorKind::Version,
-                format!("scene format version {}, this megaray reads version {VERSION} (rebuild the scene)", header.version),
+                format!(
+                    "scene format version {}, this megaray reads version {VERSION} (rebuild the scene)",
+                    header.version
+                ),
             ));
         }
         let sum = xxhash_rust::xxh3::xxh3_64(&map[..248]);
@@ -97,8 +104,8 @@ impl Scene {
         if meta.digest() != header.meta_checksum {
             return Err(bad("table checksum mismatch (tree, part, tile or material table damaged)"));
         }
-        let materials = decode_materials(&map[mats], header.material_count)
-            .ok_or_else(|| bad("material table is malformed"))?;
+        let materials =
+            decode_materials(&map[mats], header.material_count).ok_or_else(|| bad("material table is malformed"))?;
         let scene = Scene {
             path: path.to_path_buf(),
             tile_state: (0..header.tile_count).map(|_| AtomicU8::new(TILE_UNCHECKED)).collect(),
@@ -237,7 +244,8 @@ impl Scene {
     pub fn check_tile(&self, t: u32) -> Result<(), SceneError> {
         let tiles = self.tiles();
         let e = tiles.get(t as usize).ok_or_else(|| SceneError::corrupt(&self.path, format!("no tile {t}")))?;
-        let corrupt = |what: String| SceneError::new(&self.path, SceneErrorKind::CorruptTile(t), format!("tile {t}: {what}"));
+        let corrupt =
+            |what: String| SceneError::new(&self.path, SceneErrorKind::CorruptTile(t), format!("tile {t}: {what}"));
         let bytes = &self.map[e.offset as usize..e.offset as usize + e.bytes as usize];
         if xxhash_rust::xxh3::xxh3_64(bytes) != e.checksum {
             return Err(corrupt("checksum mismatch (the file is damaged)".into()));
@@ -249,9 +257,9 @@ impl Scene {
                     Child::Empty => true,
                     Child::Inner(k) => (k as usize) < v.nodes.len() && k as usize > i,
                     Child::Leaf { first, count } => count > 0 && first as u64 + count as u64 <= v.tris.len() as u64,
-                    Child::Link { tile, node } => tiles
-                        .get(tile as usize)
-                        .is_some_and(|o| o.part == e.part && tile != t && node < o.node_count),
+                    Child::Link { tile, node } => {
+                        tiles.get(tile as usize).is_some_and(|o| o.part == e.part && tile != t && node < o.node_count)
+                    }
                     Child::Part(_) => false,
                 };
                 if !ok {

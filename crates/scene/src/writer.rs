@@ -173,7 +173,7 @@ impl SceneWriter {
             root_tile: first_tile + part.root_tile,
             root_node: part.root_node,
             depth: part.depth,
-            first_prim: self.tri_count,
+            first_prim: 0, // set in part order by `finish`
             node_count,
             tile_bytes,
             normals_off: 0,
@@ -218,11 +218,13 @@ impl SceneWriter {
         materials: &[MaterialDesc],
     ) -> Result<u64, SceneError> {
         let mut parts = Vec::with_capacity(self.parts.len());
+        let mut first_prim = 0;
         for (i, p) in self.parts.iter().enumerate() {
             match p {
-                Some(p) => parts.push(*p),
+                Some(p) => parts.push(PartEntry { first_prim, ..*p }),
                 None => panic!("part {i} was never appended"),
             }
+            first_prim += parts[i].tri_count as u64;
         }
         let tiles_off = self.cursor;
         let tiles = std::mem::take(&mut self.tiles);
@@ -356,4 +358,3 @@ pub(crate) fn decode_materials(bytes: &[u8], count: u32) -> Option<Vec<MaterialD
     }
     Some(out)
 }
-

@@ -1,0 +1,105 @@
+//! Bad input ends in a one-line error naming the file and the fault, exit code 1, no panic,
+//! and no half-written output.
+
+mod common;
+
+use common::*;
+use std::path::Path;
+
+fn fails(args: &[&str], words: &[&str]) -> String {
+    let (code, _, err) = run(args);
+    assert_eq!(code, 1, "megaray {args:?} should fail with exit code 1; stderr: {err}");
+    assert!(!err.contains("panicked"), "megaray {args:?} panicked: {err}");
+    let line = err.lines().find(|l| l.starts_with("megaray: error:")).unwrap_or_else(|| panic!("no error line: {err}"));
+    for w in words {
+        assert!(line.contains(w), "error line {line:?} lacks {w:?}");
+    }
+    line.to_string()
+}
+
+fn small_scene(dir: &Path) -> std::path::PathBuf {
+    let (p, _) = build(dir, &[model("spot.obj")], "spot", Some(1000));
+    p
+}
+
+#[test]
+fn corrupt_scene_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = small_scene(dir.path());
+    let bytes = std::fs::read(&good).unwrap();
+    let out = dir.path().join("o.png");
+    let o = out.to_str().unwrap();
+    let write = |name: &str, b: &[u8]| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, b).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+
+    let p = write("truncated.mray", &bytes[..bytes.len() - 4096]);
+    fails(&["info", &p], &["truncated.mray", "truncated"]);
+    let p = write("tiny.mray", &bytes[..100]);
+    fails(&["render", &p, "-o", o], &["tiny.mray", "too short"]);
+    let mut b = bytes.clone();
+    b[0] = b'X';
+    let p = write("magic.mray", &b);
+    fails(&["info", &p], &["magic.mray", "not a megaray scene"]);
+    let mut b = bytes.clone();
+    b[8] = 99;
+    let p = write("version.mray", &b);
+    fails(&["info", &p], &["version.mray", "version 99"]);
+    let mut b = bytes.clone();
+    b[30] ^= 1; // tri_count, under the header checksum
+    let p = write("header.mray", &b);
+    fails(&["info", &p], &["header.mray", "header"]);
+    // A flipped byte inside a tile: open works, rendering reports the tile.
+    let scene = megaray_scene::Scene::open(&good).unwrap();
+    let t = scene.tiles()[scene.parts()[0].root_tile as usize];
+    let mut b = bytes.clone();
+    b[t.offset as usize + 200] ^= 0x40;
+    let p = write("tile.mray", &b);
+    fails(&["render", &p, "-o", o, "--res", "64x64"], &["tile.mray", "tile", "checksum"]);
+    fails(&["info", "--verify", &p], &["tile.mray", "checksum"]);
+    assert!(!out.exists(), "no image is written from a corrupt scene");
+    fails(&["info", "/nonexistent/x.mray"], &["x.mray", "cannot open"]);
+}
+
+#[test]
+fn bad_arguments_and_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = small_scene(dir.path());
+    let s = scene.to_str().unwrap();
+    fails(&["render", s, "-o", "/nonexistent-dir/x.png", "--res", "16x16"], &["x.png", "cannot write"]);
+    fails(&["build", &model("spot.obj").to_string_lossy(), "-o", "/nonexistent-dir/x.mray"], &["nonexistent-dir"]);
+    fails(&["build", "nothere.ply", "-o", dir.path().join("y.mray").to_str().unwrap()], &["nothere.ply"]);
+    fails(&["gen", "plant:abc", "-o", dir.path().join("z.ply").to_str().unwrap()], &["plant:abc"]);
+    fails(&["gen", "grid:10", "-o", "/nonexistent-dir/z.ply"], &["z.ply"]);
+    let (code, _, err) = run(&["render", s, "-o", "a.png", "--res", "0x10"]);
+    assert_eq!(code, 2, "clap rejects a bad resolution: {err}");
+    assert!(err.contains("0x10"));
+    fails(&["render", s, "-o", "a.png", "--eye", "0,0,0", "--at", "0,0,0"], &["camera"]);
+    fails(&["build", &model("spot.obj").to_string_lossy(), "-o", "q.mray", "--build-mem", "1M"], &["too small"]);
+    // A failed build leaves no output and no temporary files.
+    let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.iter().all(|n| !n.to_string_lossy().starts_with(".megaray")), "{left:?}");
+}
+
+#[test]
+fn malformed_models_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("m.mray");
+    let o = out.to_str().unwrap();
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("lying.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3000000000\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\0\0\0\0".to_vec(), "lying.ply"),
+        ("nan.obj", b"v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n".to_vec(), "nan.obj"),
+        ("inf.obj", b"v 0 0 0\nv 1 0 inf\nv 0 1 0\nf 1 2 3\n".to_vec(), "inf.obj"),
+        ("range.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n".to_vec(), "range.obj"),
+        ("empty.stl", Vec::new(), "empty.stl"),
+        ("magic.ply", b"plx\nformat ascii 1.0\nend_header\n".to_vec(), "magic.ply"),
+    ];
+    for (name, bytes, word) in cases {
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        fails(&["build", p.to_str().unwrap(), "-o", o], &[word]);
+        assert!(!out.exists());
+    }
+}

@@ -1,0 +1,96 @@
+//! Closest hits through the scene file equal brute-force ray-triangle tests.
+
+mod common;
+
+use common::*;
+use megaray_base::{intersect_triangle, Ray, Vec3};
+use megaray_scene::Scene;
+use megaray_trace::Tracer;
+use rayon::prelude::*;
+
+/// Every triangle of the scene, read back from its tiles.
+fn all_tris(scene: &Scene) -> Vec<[Vec3; 3]> {
+    let mut out = Vec::new();
+    for t in 0..scene.header().tile_count {
+        for tri in scene.tile(t).expect("tile is sound").tris {
+            out.push(tri.v.map(Vec3::from));
+        }
+    }
+    out
+}
+
+fn brute(tris: &[[Vec3; 3]], ray: &Ray) -> Option<f32> {
+    let mut best = ray.t_max;
+    let mut hit = None;
+    for t in tris {
+        if let Some(h) = intersect_triangle(ray, *t, best) {
+            best = h.t;
+            hit = Some(h.t);
+        }
+    }
+    hit
+}
+
+/// 10,000 rays: half from outside the box toward points inside it, half from inside in
+/// random directions. Asserts hit/miss, distance, and any-hit agree with brute force.
+fn check(scene_path: &std::path::Path, expect_tris: u64) {
+    let scene = Scene::open(scene_path).unwrap();
+    assert_eq!(scene.header().tri_count, expect_tris);
+    let tris = all_tris(&scene);
+    assert_eq!(tris.len() as u64, expect_tris);
+    let tracer = Tracer::new(&scene);
+    let b = scene.header().bounds;
+    let (lo, ext) = (b.lo(), b.extent());
+    let mut rng = Rng(7);
+    let rays: Vec<Ray> = (0..10_000)
+        .map(|i| {
+            let p = lo + ext * Vec3::new(rng.f32(), rng.f32(), rng.f32());
+            if i % 2 == 0 {
+                let dir = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5).normalize();
+                Ray::new(p - dir * b.diagonal(), dir)
+            } else {
+                Ray::new(p, Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5))
+            }
+        })
+        .collect();
+    let bad: Vec<String> = rays
+        .par_iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            let want = brute(&tris, r);
+            let got = tracer.intersect(r).map(|h| h.t);
+            let occ = tracer.occluded(r);
+            (want != got || occ != want.is_some()).then(|| format!("ray {i}: brute {want:?} tracer {got:?} any {occ}"))
+        })
+        .collect();
+    assert!(scene.first_error().is_none());
+    assert!(bad.is_empty(), "{} of 10000 rays differ, e.g. {:?}", bad.len(), &bad[..bad.len().min(5)]);
+}
+
+#[test]
+fn shared_models_match_brute_force() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, tris) in [
+        ("spot.obj", 5856),
+        ("teapot.obj", 6320),
+        ("stanford-bunny.obj", 69451),
+        ("dog_ribcage.stl", 73960),
+        ("2CylinderEngine.glb", 121496),
+        ("horse.ply", 96966),
+    ] {
+        // Several parts, so the top-level tree and links are exercised too.
+        let (scene, s) = build(dir.path(), &[model(name)], name, Some(20_000));
+        check(&scene, tris - s.degenerate_dropped);
+    }
+}
+
+#[test]
+fn generated_models_match_brute_force() {
+    let dir = tempfile::tempdir().unwrap();
+    for spec in ["sphereflake:2", "grid:100", "plant:60k"] {
+        let ply = gen(dir.path(), spec);
+        let (scene, s) = build(dir.path(), &[ply], spec, Some(5_000));
+        assert!(s.parts > 1);
+        check(&scene, s.triangles);
+    }
+}
