@@ -25,6 +25,15 @@ pub use progress::{NoProgress, Progress};
 pub use ray::{intersect_triangle, Ray, TriHit};
 pub use size::{format_size, parse_size};
 
+/// This process's peak resident set size in bytes (`VmHWM` of `/proc/self/status`), where the
+/// system reports it (Linux); `None` elsewhere.
+pub fn peak_rss() -> Option<u64> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
 /// A triangle's three corners as plain arrays, the form triangles take on disk and in streams.
 pub type TriVerts = [[f32; 3]; 3];
 

@@ -2,10 +2,9 @@
 //! 4-wide BVH in a build layout ([`Bvh4`]). The same builder makes each part's tree (over
 //! triangles) and the top-level tree (over parts). Layout for the file is [`crate::tiles`]'s job.
 
+use glam::{Vec3, Vec4};
 use megaray_base::Aabb;
 
-/// Bins per axis for in-core SAH.
-const BINS: usize = 16;
 /// Cost of one node traversal relative to one primitive test.
 const C_TRAV: f32 = 1.0;
 
@@ -59,113 +58,235 @@ pub struct Bvh4 {
     pub depth: u32,
 }
 
+/// A primitive reference while building: its box, with its number in the `w` lane of `hi`.
+/// 32 bytes, so that the builder's passes stream through memory instead of chasing indices;
+/// `glam::Vec4` keeps each corner in one SIMD register.
+#[derive(Clone, Copy, Debug)]
+#[repr(C)]
+struct PrimRef {
+    lo: Vec4,
+    hi: Vec4,
+}
+const _: () = assert!(std::mem::size_of::<PrimRef>() == 32);
+
+impl PrimRef {
+    #[inline(always)]
+    fn id(&self) -> u32 {
+        self.hi.w.to_bits()
+    }
+}
+
+/// Bounds and doubled-centroid bounds of a range of primitives (`w` lanes are ignored).
+#[derive(Clone, Copy)]
+struct Extent {
+    lo: Vec4,
+    hi: Vec4,
+    clo: Vec4,
+    chi: Vec4,
+}
+
+impl Extent {
+    const EMPTY: Extent =
+        Extent { lo: Vec4::INFINITY, hi: Vec4::NEG_INFINITY, clo: Vec4::INFINITY, chi: Vec4::NEG_INFINITY };
+    #[inline(always)]
+    fn add(&mut self, r: &PrimRef) {
+        self.lo = self.lo.min(r.lo);
+        self.hi = self.hi.max(r.hi);
+        let c = r.lo + r.hi;
+        self.clo = self.clo.min(c);
+        self.chi = self.chi.max(c);
+    }
+    fn bounds(&self) -> Aabb {
+        Aabb { min: self.lo.truncate().into(), max: self.hi.truncate().into() }
+    }
+}
+
+#[inline(always)]
+fn half_area(lo: Vec4, hi: Vec4) -> f32 {
+    let e = (hi - lo).max(Vec4::ZERO);
+    e.x * e.y + e.y * e.z + e.z * e.x
+}
+
 /// Builds a 4-wide BVH over primitives with the given boxes (centroids are box centres).
 pub fn build_bvh4(boxes: &[Aabb], cfg: BvhConfig) -> Bvh4 {
     assert!(!boxes.is_empty(), "build_bvh4 needs at least one primitive");
-    let centroids: Vec<[f32; 3]> = boxes.iter().map(|b| b.center().into()).collect();
-    let mut order: Vec<u32> = (0..boxes.len() as u32).collect();
-    let ctx = Ctx { boxes, centroids: &centroids, cfg };
-    let root = ctx.build(&mut order, 0);
+    let mut ext = Extent::EMPTY;
+    let mut refs: Vec<PrimRef> = boxes
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            let r =
+                PrimRef { lo: Vec3::from(b.min).extend(0.0), hi: Vec3::from(b.max).extend(f32::from_bits(i as u32)) };
+            ext.add(&r);
+            r
+        })
+        .collect();
+    let ctx = Ctx { cfg };
+    let root = ctx.build(&mut refs, ext, 0);
+    let order: Vec<u32> = refs.iter().map(|r| r.id()).collect();
+    drop(refs);
     let bounds = *root.bounds();
     let mut nodes = Vec::new();
     let depth = collapse(&root, &mut nodes);
     Bvh4 { nodes, order, bounds, depth }
 }
 
-struct Ctx<'a> {
-    boxes: &'a [Aabb],
-    centroids: &'a [[f32; 3]],
+struct Ctx {
     cfg: BvhConfig,
 }
 
-impl Ctx<'_> {
-    fn build(&self, idx: &mut [u32], start: u32) -> BNode {
-        let n = idx.len();
-        let mut bounds = Aabb::EMPTY;
-        let mut cb = Aabb::EMPTY;
-        for &i in idx.iter() {
-            bounds.grow(&self.boxes[i as usize]);
-            cb.grow_point(self.centroids[i as usize]);
-        }
+impl Ctx {
+    fn build(&self, refs: &mut [PrimRef], ext: Extent, start: u32) -> BNode {
+        let n = refs.len();
+        let bounds = ext.bounds();
         if n <= 1 {
             return BNode::Leaf { bounds, start, count: n as u32 };
         }
-        // Binned SAH over all three axes.
-        let mut best = (f32::INFINITY, 0usize, 0usize); // cost, axis, split bin (left = bins < split)
-        let ext = cb.extent();
-        for axis in 0..3 {
-            if ext[axis].is_nan() || ext[axis] <= 0.0 {
-                continue;
-            }
-            let lo = cb.min[axis];
-            let scale = BINS as f32 / ext[axis];
-            let mut cnt = [0u32; BINS];
-            let mut bb = [Aabb::EMPTY; BINS];
-            for &i in idx.iter() {
-                let b = (((self.centroids[i as usize][axis] - lo) * scale) as usize).min(BINS - 1);
-                cnt[b] += 1;
-                bb[b].grow(&self.boxes[i as usize]);
-            }
-            let mut right_area = [0f32; BINS];
-            let mut right_cnt = [0u32; BINS];
-            let (mut acc, mut ac) = (Aabb::EMPTY, 0u32);
-            for b in (1..BINS).rev() {
-                acc.grow(&bb[b]);
-                ac += cnt[b];
-                right_area[b] = acc.half_area();
-                right_cnt[b] = ac;
-            }
-            let (mut acc, mut ac) = (Aabb::EMPTY, 0u32);
-            for s in 1..BINS {
-                acc.grow(&bb[s - 1]);
-                ac += cnt[s - 1];
-                if ac == 0 || right_cnt[s] == 0 {
-                    continue;
-                }
-                let cost = acc.half_area() * ac as f32 + right_area[s] * right_cnt[s] as f32;
-                if cost < best.0 {
-                    best = (cost, axis, s);
-                }
-            }
-        }
+        // Binned SAH over all three axes in one pass; fewer bins for small nodes, where the
+        // per-node cost of clearing and sweeping bins would dominate.
+        let (best, nb) = if n >= 1024 {
+            (find_split::<32, 2>(refs, &ext), 32)
+        } else if n >= 32 {
+            (find_split::<16, 1>(refs, &ext), 16)
+        } else {
+            (find_split::<8, 1>(refs, &ext), 8)
+        };
+        let cmin = ext.clo;
+        let scale = bin_scale(&ext, nb);
         let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
         let split_cost = C_TRAV + best.0 / parent_area;
         let leaf_cost = n as f32;
         if n <= self.cfg.max_leaf && (leaf_cost <= split_cost || !best.0.is_finite()) {
             return BNode::Leaf { bounds, start, count: n as u32 };
         }
-        let mid = if best.0.is_finite() {
+        let (mid, le, re) = if best.0.is_finite() {
             let (axis, s) = (best.1, best.2);
-            let lo = cb.min[axis];
-            let scale = BINS as f32 / ext[axis];
-            let c = self.centroids;
-            partition(idx, |i| ((((c[i as usize][axis] - lo) * scale) as usize).min(BINS - 1)) < s)
+            partition(refs, |r| bins_of(r, cmin, scale, nb)[axis] < s)
         } else {
-            n / 2 // all centroids coincide: split the list in two
+            // All centroids coincide: split the list in two.
+            let mid = n / 2;
+            let (mut le, mut re) = (Extent::EMPTY, Extent::EMPTY);
+            refs[..mid].iter().for_each(|r| le.add(r));
+            refs[mid..].iter().for_each(|r| re.add(r));
+            (mid, le, re)
         };
-        let (l, r) = idx.split_at_mut(mid);
+        let (l, r) = refs.split_at_mut(mid);
         let (ln, rn) = if n > self.cfg.parallel_above {
-            rayon::join(|| self.build(l, start), || self.build(r, start + mid as u32))
+            rayon::join(|| self.build(l, le, start), || self.build(r, re, start + mid as u32))
         } else {
-            (self.build(l, start), self.build(r, start + mid as u32))
+            (self.build(l, le, start), self.build(r, re, start + mid as u32))
         };
         BNode::Inner { bounds, kids: Box::new([ln, rn]) }
     }
 }
 
-/// In-place partition; returns the number of elements for which `pred` holds (they come first).
-fn partition(v: &mut [u32], pred: impl Fn(u32) -> bool) -> usize {
+/// The bin of `r` on each axis: its doubled centroid mapped through `scale`, clamped to
+/// `0..nb` and rounded to the nearest integer by the 2^23 trick (no float-to-int conversion,
+/// whose saturation checks dominated the builder's profile).
+#[inline(always)]
+fn bins_of(r: &PrimRef, cmin: Vec4, scale: Vec4, nb: usize) -> [usize; 3] {
+    const MAGIC: f32 = 8_388_608.0; // 2^23: adding it leaves the integer in the low mantissa bits
+    let f = ((r.lo + r.hi - cmin) * scale).clamp(Vec4::ZERO, Vec4::splat(nb as f32 - 1.0)) + Vec4::splat(MAGIC);
+    [(f.x.to_bits() & 0xff) as usize, (f.y.to_bits() & 0xff) as usize, (f.z.to_bits() & 0xff) as usize]
+}
+
+/// Per-axis factors that map a doubled centroid to its bin (0 on flat axes).
+fn bin_scale(ext: &Extent, nb: usize) -> Vec4 {
+    let cext = ext.chi - ext.clo;
+    Vec4::select(cext.cmpgt(Vec4::ZERO), Vec4::splat(nb as f32) / cext, Vec4::ZERO)
+}
+
+/// The best binned-SAH split of `refs` with `NB` bins per axis, binning with `SETS`
+/// interleaved bin sets (2 for large nodes, so that neighbours falling into the same bin do
+/// not wait on each other's stores). Returns (cost, axis, first bin of the right side);
+/// the cost is infinite when no split separates anything.
+fn find_split<const NB: usize, const SETS: usize>(refs: &[PrimRef], ext: &Extent) -> (f32, usize, usize) {
+    let cmin = ext.clo;
+    let scale = bin_scale(ext, NB);
+    let mut cnt = [[[0u32; NB]; 3]; SETS];
+    let mut blo = [[[Vec4::INFINITY; NB]; 3]; SETS];
+    let mut bhi = [[[Vec4::NEG_INFINITY; NB]; 3]; SETS];
+    let bin_of = |r: &PrimRef| bins_of(r, cmin, scale, NB);
+    let mut groups = refs.chunks_exact(SETS);
+    for g in &mut groups {
+        for (j, r) in g.iter().enumerate() {
+            let bi = bin_of(r);
+            for k in 0..3 {
+                let i = bi[k];
+                cnt[j][k][i] += 1;
+                blo[j][k][i] = blo[j][k][i].min(r.lo);
+                bhi[j][k][i] = bhi[j][k][i].max(r.hi);
+            }
+        }
+    }
+    for r in groups.remainder() {
+        let bi = bin_of(r);
+        for k in 0..3 {
+            let i = bi[k];
+            cnt[0][k][i] += 1;
+            blo[0][k][i] = blo[0][k][i].min(r.lo);
+            bhi[0][k][i] = bhi[0][k][i].max(r.hi);
+        }
+    }
+    for j in 1..SETS {
+        for k in 0..3 {
+            for i in 0..NB {
+                cnt[0][k][i] += cnt[j][k][i];
+                blo[0][k][i] = blo[0][k][i].min(blo[j][k][i]);
+                bhi[0][k][i] = bhi[0][k][i].max(bhi[j][k][i]);
+            }
+        }
+    }
+    let (cnt, blo, bhi) = (&cnt[0], &blo[0], &bhi[0]);
+    let mut best = (f32::INFINITY, 0usize, 0usize);
+    for axis in 0..3 {
+        if scale[axis] == 0.0 {
+            continue;
+        }
+        let mut right_area = [0f32; NB];
+        let mut right_cnt = [0u32; NB];
+        let (mut lo, mut hi, mut ac) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
+        for b in (1..NB).rev() {
+            lo = lo.min(blo[axis][b]);
+            hi = hi.max(bhi[axis][b]);
+            ac += cnt[axis][b];
+            right_area[b] = half_area(lo, hi);
+            right_cnt[b] = ac;
+        }
+        let (mut lo, mut hi, mut ac) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
+        for s in 1..NB {
+            lo = lo.min(blo[axis][s - 1]);
+            hi = hi.max(bhi[axis][s - 1]);
+            ac += cnt[axis][s - 1];
+            if ac == 0 || right_cnt[s] == 0 {
+                continue;
+            }
+            let cost = half_area(lo, hi) * ac as f32 + right_area[s] * right_cnt[s] as f32;
+            if cost < best.0 {
+                best = (cost, axis, s);
+            }
+        }
+    }
+    best
+}
+
+/// In-place partition; returns the number of elements for which `pred` holds (they come
+/// first) and the extents of both sides.
+fn partition(v: &mut [PrimRef], pred: impl Fn(&PrimRef) -> bool) -> (usize, Extent, Extent) {
+    let (mut le, mut re) = (Extent::EMPTY, Extent::EMPTY);
     let mut i = 0;
     let mut j = v.len();
     while i < j {
-        if pred(v[i]) {
+        if pred(&v[i]) {
+            le.add(&v[i]);
             i += 1;
         } else {
             j -= 1;
+            re.add(&v[i]);
             v.swap(i, j);
         }
     }
-    i
+    (i, le, re)
 }
 
 /// Collapses the binary tree into 4-wide nodes (pre-order); returns the depth.

@@ -48,7 +48,7 @@ use crate::stream::{StreamFile, StreamReader, StreamTri};
 
 /// Estimated peak bytes per triangle of an in-core part build (stream records, boxes, the
 /// binary and 4-wide trees, the tiles and attribute arrays being assembled).
-pub const INCORE_BYTES_PER_TRI: u64 = 320;
+pub const INCORE_BYTES_PER_TRI: u64 = 256;
 /// Memory set aside from `build_mem` for I/O buffers and bookkeeping.
 pub const FIXED_RESERVE: u64 = 64 << 20;
 

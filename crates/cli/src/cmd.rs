@@ -123,6 +123,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
                 "input_bytes": s.input_bytes, "temp_read": s.temp_read, "temp_written": s.temp_written,
                 "import_s": s.import_s, "split_s": s.split_s, "parts_s": s.parts_s, "total_s": s.total_s,
                 "mtris_s": s.triangles as f64 / s.total_s / 1e6,
+                "build_mem": a.build_mem, "peak_rss": megaray_base::peak_rss(),
             })
         );
     } else {
@@ -149,6 +150,9 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             format_size(s.temp_written),
             format_size(s.file_bytes)
         );
+        if let Some(rss) = megaray_base::peak_rss() {
+            eprintln!("peak memory {} (budget --build-mem {})", format_size(rss), format_size(a.build_mem));
+        }
     }
     Ok(())
 }

@@ -66,3 +66,19 @@ fn build_memory_bound_sets_part_size_and_degenerates_are_counted() {
     let opts = megaray_build::BuildOptions { build_mem: 1 << 30, threads: 2, ..Default::default() };
     assert_eq!(opts.part_limit(), ((1u64 << 30) - (64 << 20)) / (2 * megaray_build::INCORE_BYTES_PER_TRI));
 }
+
+/// A model whose in-core build would need several times the budget builds within it.
+#[test]
+fn peak_memory_stays_within_build_mem() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = gen(dir.path(), "plant:2M");
+    let out = dir.path().join("p.mray");
+    let (code, json, err) =
+        run(&["build", ply.to_str().unwrap(), "-o", out.to_str().unwrap(), "--build-mem", "160M", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(json.trim()).unwrap();
+    let rss = v["peak_rss"].as_u64().expect("peak_rss reported on Linux");
+    // In core this model needs about 2M x 170 bytes = 340 MB.
+    assert!(v["parts"].as_u64().unwrap() >= 4, "{v}");
+    assert!(rss < (160 << 20) + (32 << 20), "peak RSS {} MiB over the 160 MiB budget + 32 MiB", rss >> 20);
+}
