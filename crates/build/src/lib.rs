@@ -7,10 +7,10 @@
 //! 1. **Import** ([`sink`]): every input streams into one positions-only triangle stream file
 //!    ([`stream::StreamTri`], 48 bytes a triangle) plus attribute streams keyed by triangle id
 //!    ([`attrs`]); bounds are gathered on the way, zero-area triangles dropped and counted.
-//! 2. **Split** ([`split`]): while a stream holds more triangles than one part may, choose a
-//!    plane with the binned SAH over triangle centroids (longest-axis midpoint when the SAH finds
-//!    nothing) and route each triangle by its centroid into one of two child files. The bins of
-//!    each child are gathered while it is written, so every level costs one read and one write.
+//! 2. **Split** ([`split`]): while a stream holds more triangles than one part may, plan a
+//!    multi-level split on a sample of its triangles (binned SAH over centroids, longest-axis
+//!    midpoint when the SAH finds nothing) and route each triangle by its centroid into one of
+//!    up to 64 child files in one pass; children still too large are split again.
 //! 3. **Parts** ([`bvh`], [`tiles`]): each stream small enough is loaded and built in core
 //!    (binned SAH, collapsed to a 4-wide BVH), cut into page-aligned tiles and appended to the
 //!    scene file with its attributes. Parts build in parallel, as many at once as threads, each
@@ -63,6 +63,8 @@ pub struct BuildOptions {
     pub tile_target: u32,
     /// Largest part, in triangles; `None`: derived from `build_mem` and `threads`.
     pub max_part_tris: Option<u64>,
+    /// Most child files one split pass writes (see [`split`]); 2 gives classic binary splits.
+    pub split_fanout: usize,
     /// Memory the readers may use for vertex tables (part of `build_mem`).
     pub import_mem: Option<u64>,
     /// Set it from another thread (a Ctrl-C handler) to stop the build; it then returns
@@ -77,6 +79,7 @@ impl Default for BuildOptions {
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
             tile_target: 256 << 10,
             max_part_tris: None,
+            split_fanout: 64,
             import_mem: None,
             cancel: Arc::new(AtomicBool::new(false)),
         }
@@ -101,8 +104,10 @@ pub struct BuildSummary {
     pub degenerate_dropped: u64,
     pub parts: u32,
     pub tiles: u32,
-    /// Deepest level of file splits (0: the whole model was one part).
+    /// Deepest level of the split hierarchy (0: the whole model was one part).
     pub split_levels: u32,
+    /// Passes over stream files that the splits took (each reads and writes its stream once).
+    pub split_passes: u32,
     pub part_limit: u64,
     pub file_bytes: u64,
     /// Bytes read from inputs.
@@ -206,7 +211,7 @@ pub fn build_scene(
     let t1 = Instant::now();
     let limit = opts.part_limit();
     let io = split::IoCount::default();
-    progress.stage("split", triangles * 48 * split::estimate_levels(triangles, limit) as u64);
+    progress.stage("split", if triangles > limit { triangles * 48 } else { 0 });
     let mut parts = pool.install(|| split::split(root, limit, opts, &io, progress))?;
     progress.finish();
     // Parts in a spatially coherent order (the order the splits produced them).
@@ -248,6 +253,7 @@ pub fn build_scene(
         parts: parts.len() as u32,
         tiles,
         split_levels,
+        split_passes: io.passes.load(Ordering::Relaxed),
         part_limit: limit,
         file_bytes,
         input_bytes,

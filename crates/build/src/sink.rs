@@ -23,7 +23,7 @@ pub struct BuildSink<'a> {
 impl<'a> BuildSink<'a> {
     pub fn new(dir: &Path, opts: &'a BuildOptions) -> Result<BuildSink<'a>, BuildError> {
         Ok(BuildSink {
-            stream: StreamWriter::create(&dir.join("s"), None, 0)?,
+            stream: StreamWriter::create(&dir.join("s"), crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0)?,
             attrs: AttrStreams::new(dir),
             materials: Vec::new(),
             dropped: 0,

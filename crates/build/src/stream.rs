@@ -37,39 +37,35 @@ impl StreamTri {
 /// Buffer size of stream readers and writers.
 pub const IO_BUF: usize = 4 << 20;
 
-/// Number of SAH bins per axis.
-pub const BINS: usize = 32;
-
-/// Binned centroid statistics over a fixed box, gathered while a stream is written.
+/// A uniform random sample (reservoir sampling, deterministic) of the triangle boxes of a
+/// stream, gathered while the stream is written; the split planner works on it.
 #[derive(Clone, Debug)]
-pub struct Bins {
-    pub range: Aabb,
-    pub count: [[u64; BINS]; 3],
-    pub bounds: [[Aabb; BINS]; 3],
+pub struct Sample {
+    pub boxes: Vec<Aabb>,
+    seen: u64,
+    cap: usize,
+    rng: u64,
 }
 
-impl Bins {
-    pub fn new(range: Aabb) -> Bins {
-        Bins { range, count: [[0; BINS]; 3], bounds: [[Aabb::EMPTY; BINS]; 3] }
+impl Sample {
+    pub fn new(cap: usize) -> Sample {
+        Sample { boxes: Vec::new(), seen: 0, cap, rng: 0x9e37_79b9_7f4a_7c15 }
     }
 
     #[inline]
-    pub fn bin_of(&self, axis: usize, c: f32) -> usize {
-        let lo = self.range.min[axis];
-        let ext = self.range.max[axis] - lo;
-        if ext.is_nan() || ext <= 0.0 {
-            return 0;
+    pub fn add(&mut self, b: &Aabb) {
+        self.seen += 1;
+        if self.boxes.len() < self.cap {
+            self.boxes.push(*b);
+            return;
         }
-        let b = ((c - lo) / ext * BINS as f32) as isize;
-        b.clamp(0, BINS as isize - 1) as usize
-    }
-
-    #[inline]
-    pub fn add(&mut self, c: [f32; 3], b: &Aabb) {
-        for (axis, &ca) in c.iter().enumerate() {
-            let i = self.bin_of(axis, ca);
-            self.count[axis][i] += 1;
-            self.bounds[axis][i].grow(b);
+        // xorshift64*
+        self.rng ^= self.rng >> 12;
+        self.rng ^= self.rng << 25;
+        self.rng ^= self.rng >> 27;
+        let j = self.rng.wrapping_mul(0x2545_f491_4f6c_dd1d) % self.seen;
+        if (j as usize) < self.cap {
+            self.boxes[j as usize] = *b;
         }
     }
 }
@@ -81,32 +77,32 @@ pub struct StreamFile {
     pub count: u64,
     pub bounds: Aabb,
     pub cbounds: Aabb,
-    pub bins: Option<Bins>,
+    pub sample: Sample,
     /// How many file splits led to this stream (the input stream is level 0).
     pub level: u32,
 }
 
-/// Writes a stream file, keeping its count, bounds, centroid bounds and (optionally) bins.
+/// Writes a stream file, keeping its count, bounds, centroid bounds and a sample of its boxes.
 pub struct StreamWriter {
     path: PathBuf,
     out: BufWriter<File>,
     count: u64,
     bounds: Aabb,
     cbounds: Aabb,
-    bins: Option<Bins>,
+    sample: Sample,
     level: u32,
 }
 
 impl StreamWriter {
-    pub fn create(path: &Path, bin_range: Option<Aabb>, level: u32) -> Result<StreamWriter, BuildError> {
+    pub fn create(path: &Path, sample_cap: usize, buf: usize, level: u32) -> Result<StreamWriter, BuildError> {
         let f = File::create(path).map_err(|e| BuildError::io(path, "create", e))?;
         Ok(StreamWriter {
             path: path.to_path_buf(),
-            out: BufWriter::with_capacity(IO_BUF, f),
+            out: BufWriter::with_capacity(buf, f),
             count: 0,
             bounds: Aabb::EMPTY,
             cbounds: Aabb::EMPTY,
-            bins: bin_range.map(Bins::new),
+            sample: Sample::new(sample_cap),
             level,
         })
     }
@@ -117,9 +113,7 @@ impl StreamWriter {
         let c = [(b.min[0] + b.max[0]) * 0.5, (b.min[1] + b.max[1]) * 0.5, (b.min[2] + b.max[2]) * 0.5];
         self.bounds.grow(&b);
         self.cbounds.grow_point(c);
-        if let Some(bins) = &mut self.bins {
-            bins.add(c, &b);
-        }
+        self.sample.add(&b);
         self.count += 1;
         self.out.write_all(bytemuck::bytes_of(t)).map_err(|e| BuildError::io(&self.path, "write", e))
     }
@@ -136,7 +130,7 @@ impl StreamWriter {
             count: self.count,
             bounds: self.bounds,
             cbounds: self.cbounds,
-            bins: self.bins,
+            sample: self.sample,
             level: self.level,
         })
     }

@@ -119,7 +119,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             serde_json::json!({
                 "out": a.out, "inputs": s.inputs, "triangles": s.triangles,
                 "degenerate_dropped": s.degenerate_dropped, "parts": s.parts, "tiles": s.tiles,
-                "split_levels": s.split_levels, "part_limit": s.part_limit, "file_bytes": s.file_bytes,
+                "split_levels": s.split_levels, "split_passes": s.split_passes, "part_limit": s.part_limit, "file_bytes": s.file_bytes,
                 "input_bytes": s.input_bytes, "temp_read": s.temp_read, "temp_written": s.temp_written,
                 "import_s": s.import_s, "split_s": s.split_s, "parts_s": s.parts_s, "total_s": s.total_s,
                 "mtris_s": s.triangles as f64 / s.total_s / 1e6,
@@ -128,12 +128,13 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
         );
     } else {
         eprintln!(
-            "built {}: {} triangles ({} degenerate dropped), {} parts after {} split levels, {} tiles, {} ({:.1} bytes/triangle)",
+            "built {}: {} triangles ({} degenerate dropped), {} parts after {} split levels in {} passes, {} tiles, {} ({:.1} bytes/triangle)",
             a.out.display(),
             s.triangles,
             s.degenerate_dropped,
             s.parts,
             s.split_levels,
+            s.split_passes,
             s.tiles,
             format_size(s.file_bytes),
             s.file_bytes as f64 / s.triangles as f64

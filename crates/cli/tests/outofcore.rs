@@ -24,19 +24,32 @@ fn three_levels_of_splits_render_like_one_part() {
     let (one, s1) = build(dir.path(), std::slice::from_ref(&ply), "one", None);
     assert_eq!(s1.parts, 1);
     assert_eq!(s1.split_levels, 0);
-    let (many, s2) = build(dir.path(), &[ply], "many", Some(4_000));
+    // Multi-way passes (the default), and classic binary splits: one pass per level.
+    let (many, s2) = build(dir.path(), std::slice::from_ref(&ply), "many", Some(4_000));
     assert!(s2.split_levels >= 3, "only {} split levels", s2.split_levels);
     assert!(s2.parts >= 8);
     assert_eq!(s1.triangles, s2.triangles);
+    let binary = dir.path().join("binary.mray");
+    let opts = megaray_build::BuildOptions {
+        max_part_tris: Some(4_000),
+        split_fanout: 2,
+        tile_target: 64 << 10,
+        ..Default::default()
+    };
+    let s3 = megaray_build::build_scene(&[ply], &binary, &opts, &megaray_base::NoProgress).unwrap();
+    assert!(s3.split_passes >= 7 && s3.split_levels >= 5, "{} passes, {} levels", s3.split_passes, s3.split_levels);
     for off in [DEFAULT_OFFSET, CLOSE_OFFSET] {
-        let (a, b) = (image(&one, off), image(&many, off));
-        let worst = a
-            .pixels
-            .iter()
-            .zip(&b.pixels)
-            .flat_map(|(p, q)| (0..3).map(move |k| (p[k] - q[k]).abs()))
-            .fold(0.0f32, f32::max);
-        assert!(worst <= 1e-6, "images differ by {worst}");
+        let a = image(&one, off);
+        for other in [&many, &binary] {
+            let b = image(other, off);
+            let worst = a
+                .pixels
+                .iter()
+                .zip(&b.pixels)
+                .flat_map(|(p, q)| (0..3).map(move |k| (p[k] - q[k]).abs()))
+                .fold(0.0f32, f32::max);
+            assert!(worst <= 1e-6, "{}: images differ by {worst}", other.display());
+        }
         // And the picture is not empty: something was hit.
         let sky = a.pixels[0];
         assert!(a.pixels.iter().filter(|p| **p != sky).count() > 100);
