@@ -10,7 +10,7 @@
 //! 2. **Split** ([`split`]): while a stream holds more triangles than one part may, plan a
 //!    multi-level split on a sample of its triangles (binned SAH over centroids, longest-axis
 //!    midpoint when the SAH finds nothing) and route each triangle by its centroid into one of
-//!    up to 64 child files in one pass; children still too large are split again.
+//!    up to 256 child files in one pass; children still too large are split again.
 //! 3. **Parts** ([`bvh`], [`tiles`]): each stream small enough is loaded and built in core
 //!    (binned SAH, collapsed to a 4-wide BVH), cut into page-aligned tiles and appended to the
 //!    scene file with its attributes. Parts build in parallel, as many at once as threads, each
@@ -79,7 +79,7 @@ impl Default for BuildOptions {
             threads: std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1),
             tile_target: 256 << 10,
             max_part_tris: None,
-            split_fanout: 64,
+            split_fanout: 256,
             import_mem: None,
             cancel: Arc::new(AtomicBool::new(false)),
         }
@@ -314,25 +314,35 @@ fn build_part(
         at += n;
     }
     io.read.fetch_add(s.count * 48, Ordering::Relaxed);
-    let boxes: Vec<Aabb> = recs.iter().map(|t| t.bounds()).collect();
-    let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX } };
-    let bvh = build_bvh4(&boxes, cfg);
-    drop(boxes);
     let ids: Vec<u64> = recs.iter().map(|t| t.id).collect();
     let tris: Vec<[[f32; 3]; 3]> = recs.iter().map(|t| t.v).collect();
     drop(recs);
-    let tiled = tiles::tile_part(&bvh, &tris, opts.tile_target as u64);
+    let (mut blob, tri_source) = build_in_core(&tris, opts.tile_target, parallel);
     drop(tris);
-    let ids: Vec<u64> = tiled.tri_source.iter().map(|&i| ids[i as usize]).collect();
-    Ok(PartBlob {
+    let ids: Vec<u64> = tri_source.iter().map(|&i| ids[i as usize]).collect();
+    blob.normals = attrs.gather::<PackedNormals>(attrs::NORMAL, &ids)?;
+    blob.uvs = attrs.gather::<[[f32; 2]; 3]>(attrs::UV, &ids)?;
+    blob.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &ids)?;
+    blob.materials = attrs.gather::<u32>(attrs::MATERIAL, &ids)?;
+    Ok(blob)
+}
+
+/// Builds one part in core from triangles in memory: its 4-wide BVH, cut into tiles of
+/// about `tile_target` bytes (no attributes). Also returns, for each triangle in file order,
+/// its index in `tris`. This is the in-core builder that `megaray bench` times.
+pub fn build_in_core(tris: &[[[f32; 3]; 3]], tile_target: u32, parallel: bool) -> (PartBlob, Vec<u32>) {
+    let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t)).collect();
+    let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX } };
+    let bvh = build_bvh4(&boxes, cfg);
+    drop(boxes);
+    let tiled = tiles::tile_part(&bvh, tris, tile_target as u64);
+    let blob = PartBlob {
         bounds: bvh.bounds,
         depth: bvh.depth,
         root_tile: tiled.root_tile,
         root_node: tiled.root_node,
-        normals: attrs.gather::<PackedNormals>(attrs::NORMAL, &ids)?,
-        uvs: attrs.gather::<[[f32; 2]; 3]>(attrs::UV, &ids)?,
-        colors: attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &ids)?,
-        materials: attrs.gather::<u32>(attrs::MATERIAL, &ids)?,
         tiles: tiled.tiles,
-    })
+        ..PartBlob::default()
+    };
+    (blob, tiled.tri_source)
 }

@@ -8,7 +8,7 @@
 //! pieces. Then one pass routes every triangle down the planned tree by its centroid into
 //! one of up to `fanout` child files, each gathering its own sample. Children still too large
 //! (sampling error, or more pieces needed than `fanout`) are split again the same way, in
-//! parallel. With the default fanout of 64 a model of any size up to 64 parts costs one
+//! parallel. With the default fanout of 256 a model of up to about 200 parts costs one
 //! read and one write of the stream.
 //!
 //! When the SAH finds no split (all sampled centroids equal), the longest-axis midpoint is
@@ -33,9 +33,9 @@ pub struct IoCount {
 /// Boxes sampled from the input stream.
 pub const ROOT_SAMPLE: usize = 1 << 18;
 /// Boxes sampled from each child stream.
-pub const CHILD_SAMPLE: usize = 1 << 14;
+pub const CHILD_SAMPLE: usize = 1 << 12;
 /// Write buffer of each child stream during routing.
-const CHILD_BUF: usize = 256 << 10;
+const CHILD_BUF: usize = 128 << 10;
 /// Records read at a time.
 const CHUNK: usize = 1 << 15;
 /// Plan pieces to this fraction of the limit, leaving room for sampling error.

@@ -128,7 +128,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
         );
     } else {
         eprintln!(
-            "built {}: {} triangles ({} degenerate dropped), {} parts after {} split levels in {} passes, {} tiles, {} ({:.1} bytes/triangle)",
+            "built {}: {} triangles ({} degenerate dropped), {} parts after {} split levels ({} passes over the stream), {} tiles, {} ({:.1} bytes/triangle)",
             a.out.display(),
             s.triangles,
             s.degenerate_dropped,

@@ -151,6 +151,15 @@ impl<'s> Tracer<'s> {
         self.traverse(ray, false)
     }
 
+    /// The closest hits of a packet of rays (coherent ones, such as 4x4 pixels), into `hits`
+    /// (same length as `rays`). Exactly the results of [`Tracer::intersect`] on each ray.
+    pub fn intersect_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
+        for (r, h) in rays.iter().zip(hits.iter_mut()) {
+            *h = self.intersect(r);
+        }
+    }
+
     /// Whether anything lies on `ray` in `[ray.t_min, ray.t_max)`.
     pub fn occluded(&self, ray: &Ray) -> bool {
         self.traverse(ray, true).is_some()
