@@ -22,7 +22,7 @@ mod size;
 pub use aabb::Aabb;
 pub use glam::Vec3;
 pub use progress::{NoProgress, Progress};
-pub use ray::{intersect_triangle, Ray, TriHit};
+pub use ray::{intersect_triangle, Ray, TriHit, WatertightRay};
 pub use size::{format_size, parse_size};
 
 /// This process's peak resident set size in bytes (`VmHWM` of `/proc/self/status`), where the

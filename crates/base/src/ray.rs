@@ -141,3 +141,78 @@ mod tests {
         assert!(intersect_triangle(&r, tri, 1.0).is_none());
     }
 }
+
+/// Per-ray constants of the watertight test, computed once per ray ([`WatertightRay::new`]) and
+/// reused for every triangle the ray meets. Gives exactly the results of [`intersect_triangle`].
+#[derive(Clone, Copy, Debug)]
+pub struct WatertightRay {
+    pub org: [f32; 3],
+    pub k: [usize; 3],
+    pub s: [f32; 3],
+    pub t_min: f32,
+}
+
+impl WatertightRay {
+    #[inline]
+    pub fn new(ray: &Ray) -> WatertightRay {
+        let d = ray.dir;
+        let ad = d.abs();
+        let kz = if ad.x > ad.y {
+            if ad.x > ad.z {
+                0
+            } else {
+                2
+            }
+        } else if ad.y > ad.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        if d[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        let sz = 1.0 / d[kz];
+        WatertightRay { org: ray.org.into(), k: [kx, ky, kz], s: [d[kx] * sz, d[ky] * sz, sz], t_min: ray.t_min }
+    }
+
+    /// The watertight test against triangle `tri` (corners as arrays), hits in `[t_min, t_max)`.
+    #[inline(always)]
+    pub fn intersect(&self, tri: &[[f32; 3]; 3], t_max: f32) -> Option<TriHit> {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, sz] = self.s;
+        let o = self.org;
+        let (a, b, c) = (&tri[0], &tri[1], &tri[2]);
+        let (az, bz, cz) = (a[kz] - o[kz], b[kz] - o[kz], c[kz] - o[kz]);
+        let ax = (a[kx] - o[kx]) - sx * az;
+        let ay = (a[ky] - o[ky]) - sy * az;
+        let bx = (b[kx] - o[kx]) - sx * bz;
+        let by = (b[ky] - o[ky]) - sy * bz;
+        let cx = (c[kx] - o[kx]) - sx * cz;
+        let cy = (c[ky] - o[ky]) - sy * cz;
+        let mut u = cx * by - cy * bx;
+        let mut v = ax * cy - ay * cx;
+        let mut w = bx * ay - by * ax;
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            let (axd, ayd, bxd, byd, cxd, cyd) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+            u = (cxd * byd - cyd * bxd) as f32;
+            v = (axd * cyd - ayd * cxd) as f32;
+            w = (bxd * ayd - byd * axd) as f32;
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+        let inv_det = 1.0 / det;
+        let t = t_scaled * inv_det;
+        if !(t >= self.t_min && t < t_max) {
+            return None;
+        }
+        Some(TriHit { t, u: v * inv_det, v: w * inv_det })
+    }
+}

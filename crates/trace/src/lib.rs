@@ -19,7 +19,8 @@
 //! }
 //! ```
 
-use megaray_base::{intersect_triangle, Ray, Vec3};
+use glam::Vec4;
+use megaray_base::{Ray, Vec3, WatertightRay};
 use megaray_scene::format::{Child, ChildRef, Node4};
 use megaray_scene::{Scene, Tile};
 
@@ -64,36 +65,43 @@ struct Entry {
     t: f32,
 }
 
-/// Precomputed per-ray values for box tests.
+/// Precomputed per-ray values for box tests: the four slots of a [`Node4`] are tested at
+/// once with 4-wide vectors (`glam::Vec4`, SSE on x86-64), near and far planes chosen once
+/// per ray from the direction's signs.
 struct RayBox {
-    org: [f32; 3],
-    inv: [f32; 3],
+    org: [Vec4; 3],
+    inv: [Vec4; 3],
+    neg: [bool; 3],
 }
 
 impl RayBox {
     fn new(r: &Ray) -> RayBox {
         let fix = |d: f32| if d.abs() < 1e-20 { 1e-20f32.copysign(d) } else { d };
-        RayBox { org: r.org.into(), inv: [1.0 / fix(r.dir.x), 1.0 / fix(r.dir.y), 1.0 / fix(r.dir.z)] }
+        let inv = [1.0 / fix(r.dir.x), 1.0 / fix(r.dir.y), 1.0 / fix(r.dir.z)];
+        RayBox {
+            org: [Vec4::splat(r.org.x), Vec4::splat(r.org.y), Vec4::splat(r.org.z)],
+            inv: inv.map(Vec4::splat),
+            neg: inv.map(|i| i < 0.0),
+        }
     }
 
-    /// Entry distance of each slot's box, or +inf where the ray misses it within `[t0, t1)`.
+    /// Entry distances of the four slots and a bit mask of the slots the ray enters
+    /// within `[t0, t1]`.
     #[inline(always)]
-    fn test(&self, n: &Node4, t0: f32, t1: f32) -> [f32; 4] {
-        let mut out = [f32::INFINITY; 4];
-        for (i, o) in out.iter_mut().enumerate() {
-            let ax = (n.lo_x[i] - self.org[0]) * self.inv[0];
-            let bx = (n.hi_x[i] - self.org[0]) * self.inv[0];
-            let ay = (n.lo_y[i] - self.org[1]) * self.inv[1];
-            let by = (n.hi_y[i] - self.org[1]) * self.inv[1];
-            let az = (n.lo_z[i] - self.org[2]) * self.inv[2];
-            let bz = (n.hi_z[i] - self.org[2]) * self.inv[2];
-            let near = ax.min(bx).max(ay.min(by)).max(az.min(bz)).max(t0);
-            let far = (ax.max(bx).min(ay.max(by)).min(az.max(bz)) * BOX_EPS).min(t1);
-            if near <= far {
-                *o = near;
-            }
-        }
-        out
+    fn test(&self, n: &Node4, t0: f32, t1: f32) -> (Vec4, u32) {
+        let axis = |lo: &[f32; 4], hi: &[f32; 4], k: usize| {
+            let (near, far) = if self.neg[k] { (hi, lo) } else { (lo, hi) };
+            (
+                (Vec4::from_array(*near) - self.org[k]) * self.inv[k],
+                (Vec4::from_array(*far) - self.org[k]) * self.inv[k],
+            )
+        };
+        let (nx, fx) = axis(&n.lo_x, &n.hi_x, 0);
+        let (ny, fy) = axis(&n.lo_y, &n.hi_y, 1);
+        let (nz, fz) = axis(&n.lo_z, &n.hi_z, 2);
+        let near = nx.max(ny).max(nz).max(Vec4::splat(t0));
+        let far = (fx.min(fy).min(fz) * BOX_EPS).min(Vec4::splat(t1));
+        (near, near.cmple(far).bitmask())
     }
 }
 
@@ -167,6 +175,7 @@ impl<'s> Tracer<'s> {
 
     fn traverse(&self, ray: &Ray, any: bool) -> Option<Hit> {
         let rb = RayBox::new(ray);
+        let wt = WatertightRay::new(ray);
         let mut best: Option<Hit> = None;
         let mut t_best = ray.t_max;
         let mut stack = [Entry { arr: TOP, node: 0, t: 0.0 }; STACK];
@@ -191,40 +200,52 @@ impl<'s> Tracer<'s> {
                 continue;
             }
             let node = &c.nodes[e.node as usize];
-            let d = rb.test(node, ray.t_min, t_best);
-            // Push hit children far-to-near so the nearest is popped first.
-            let mut order = [0usize, 1, 2, 3];
-            order.sort_unstable_by(|a, b| d[*b].total_cmp(&d[*a]));
-            for &k in &order {
-                if d[k] == f32::INFINITY {
-                    continue;
-                }
-                let child = match ChildRef(node.child[k]).decode() {
-                    Child::Empty => continue,
-                    Child::Inner(n) => Entry { arr: e.arr, node: n, t: d[k] },
-                    Child::Link { tile, node } => Entry { arr: tile, node, t: d[k] },
-                    Child::Part(p) => Entry { t: d[k], ..self.part_root(p) },
-                    Child::Leaf { first, count } => {
-                        let tile = c.tile.expect("leaves live in tiles");
-                        for i in first..first + count {
-                            let tri = tile.tris[i as usize].v;
-                            let corners = [Vec3::from(tri[0]), Vec3::from(tri[1]), Vec3::from(tri[2])];
-                            if let Some(h) = intersect_triangle(ray, corners, t_best) {
-                                t_best = h.t;
-                                best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim: c.first_tri + i, tri });
-                                if any {
-                                    return best;
-                                }
+            let (dist, mut mask) = rb.test(node, ray.t_min, t_best);
+            // Children hit, sorted far to near (pushed in that order, the nearest pops first).
+            let mut hits = [(0f32, 0u64); 4];
+            let mut nh = 0;
+            while mask != 0 {
+                let k = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let child = node.child[k];
+                if let Child::Leaf { first, count } = ChildRef(child).decode() {
+                    let tile = c.tile.expect("leaves live in tiles");
+                    for i in first..first + count {
+                        let tri = &tile.tris[i as usize].v;
+                        if let Some(h) = wt.intersect(tri, t_best) {
+                            t_best = h.t;
+                            best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim: c.first_tri + i, tri: *tri });
+                            if any {
+                                return best;
                             }
                         }
-                        continue;
                     }
+                    continue;
+                }
+                let d = dist[k];
+                let mut j = nh;
+                while j > 0 && hits[j - 1].0 < d {
+                    hits[j] = hits[j - 1];
+                    j -= 1;
+                }
+                hits[j] = (d, child);
+                nh += 1;
+            }
+            for &(d, child) in &hits[..nh] {
+                if d >= t_best {
+                    continue;
+                }
+                let entry = match ChildRef(child).decode() {
+                    Child::Inner(n) => Entry { arr: e.arr, node: n, t: d },
+                    Child::Link { tile, node } => Entry { arr: tile, node, t: d },
+                    Child::Part(p) => Entry { t: d, ..self.part_root(p) },
+                    Child::Empty | Child::Leaf { .. } => continue,
                 };
                 if sp < STACK {
-                    stack[sp] = child;
+                    stack[sp] = entry;
                     sp += 1;
                 } else {
-                    spill.push(child);
+                    spill.push(entry);
                 }
             }
         }
