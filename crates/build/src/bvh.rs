@@ -5,8 +5,15 @@
 use glam::{Vec3, Vec4};
 use megaray_base::Aabb;
 
-/// Cost of one node traversal relative to one primitive test.
+/// Cost of one node traversal relative to one test of a block of four primitives.
 const C_TRAV: f32 = 1.0;
+/// Primitives are tested four at a time (one SIMD block), so the SAH counts blocks.
+const BLOCK: u32 = 4;
+
+#[inline(always)]
+fn blocks(n: u32) -> f32 {
+    n.div_ceil(BLOCK) as f32
+}
 
 /// Builder settings.
 #[derive(Clone, Copy, Debug)]
@@ -155,7 +162,7 @@ impl Ctx {
         let scale = bin_scale(&ext, nb);
         let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
         let split_cost = C_TRAV + best.0 / parent_area;
-        let leaf_cost = n as f32;
+        let leaf_cost = blocks(n as u32);
         if n <= self.cfg.max_leaf && (leaf_cost <= split_cost || !best.0.is_finite()) {
             return BNode::Leaf { bounds, start, count: n as u32 };
         }
@@ -261,7 +268,7 @@ fn find_split<const NB: usize, const SETS: usize>(refs: &[PrimRef], ext: &Extent
             if ac == 0 || right_cnt[s] == 0 {
                 continue;
             }
-            let cost = half_area(lo, hi) * ac as f32 + right_area[s] * right_cnt[s] as f32;
+            let cost = half_area(lo, hi) * blocks(ac) + right_area[s] * blocks(right_cnt[s]);
             if cost < best.0 {
                 best = (cost, axis, s);
             }

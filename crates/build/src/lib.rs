@@ -233,7 +233,7 @@ pub fn build_scene(
         parts.par_iter().enumerate().with_max_len(1).try_for_each(|(i, p)| -> Result<(), BuildError> {
             check_cancel(opts)?;
             let blob = build_part(p, attrs, opts, single, &io)?;
-            let n = blob.tri_count();
+            let n = blob.tri_count;
             writer.lock().unwrap_or_else(|e| e.into_inner()).append_part(i as u32, blob)?;
             let _ = std::fs::remove_file(&p.path);
             progress.inc(n);
@@ -319,7 +319,17 @@ fn build_part(
     drop(recs);
     let (mut blob, tri_source) = build_in_core(&tris, opts.tile_target, parallel);
     drop(tris);
-    let ids: Vec<u64> = tri_source.iter().map(|&i| ids[i as usize]).collect();
+    // Attributes per slot; padding lanes repeat the id of the block's first triangle.
+    let mut last = 0;
+    let ids: Vec<u64> = tri_source
+        .iter()
+        .map(|&i| {
+            if i != tiles::PADDING {
+                last = ids[i as usize];
+            }
+            last
+        })
+        .collect();
     blob.normals = attrs.gather::<PackedNormals>(attrs::NORMAL, &ids)?;
     blob.uvs = attrs.gather::<[[f32; 2]; 3]>(attrs::UV, &ids)?;
     blob.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &ids)?;
@@ -328,8 +338,9 @@ fn build_part(
 }
 
 /// Builds one part in core from triangles in memory: its 4-wide BVH, cut into tiles of
-/// about `tile_target` bytes (no attributes). Also returns, for each triangle in file order,
-/// its index in `tris`. This is the in-core builder that `megaray bench` times.
+/// about `tile_target` bytes (no attributes). Also returns, for each triangle slot in file
+/// order (4 per block), the index in `tris` of its triangle or [`tiles::PADDING`]. This is
+/// the in-core builder that `megaray bench` times.
 pub fn build_in_core(tris: &[[[f32; 3]; 3]], tile_target: u32, parallel: bool) -> (PartBlob, Vec<u32>) {
     let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t)).collect();
     let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX } };
@@ -338,6 +349,7 @@ pub fn build_in_core(tris: &[[[f32; 3]; 3]], tile_target: u32, parallel: bool) -
     let tiled = tiles::tile_part(&bvh, tris, tile_target as u64);
     let blob = PartBlob {
         bounds: bvh.bounds,
+        tri_count: tris.len() as u64,
         depth: bvh.depth,
         root_tile: tiled.root_tile,
         root_node: tiled.root_node,

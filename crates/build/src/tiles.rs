@@ -1,12 +1,12 @@
 //! Cutting a part's 4-wide BVH into tiles: the conversion from build layout to file layout.
 //!
 //! A tile holds whole subtrees where it can. Subtrees of at most `target` bytes (nodes at
-//! 128 bytes, triangles at 36) are *units*: a unit is never split across tiles. Nodes above
+//! 128 bytes, leaves at 144 bytes per started block of four triangles) are *units*: a unit is never split across tiles. Nodes above
 //! the units stand alone. Walking the tree depth-first, units and lone nodes are packed into
 //! tiles next-fit, so a tile holds neighbouring geometry. Inside a tile, nodes keep depth-first
 //! order (children after parents); a child in another tile is reached through a link.
 
-use megaray_scene::format::{ChildRef, Node4, Tri};
+use megaray_scene::format::{ChildRef, Node4, Tri4};
 use megaray_scene::TileBlob;
 
 use crate::bvh::{Bvh4, Kid};
@@ -16,9 +16,18 @@ pub struct Tiled {
     pub tiles: Vec<TileBlob>,
     pub root_tile: u32,
     pub root_node: u32,
-    /// For each triangle in file order (tile by tile), its index in the `tris` given to
-    /// [`tile_part`] (attributes are gathered in this order).
+    /// For each triangle slot in file order (tile by tile, 4 per block), the index in the
+    /// `tris` given to [`tile_part`] of its triangle, or [`PADDING`] for an empty lane
+    /// (attributes are gathered in this order).
     pub tri_source: Vec<u32>,
+}
+
+/// The `tri_source` of a padding lane.
+pub const PADDING: u32 = u32::MAX;
+
+/// Bytes of a leaf of `count` triangles.
+fn leaf_bytes(count: u32) -> u64 {
+    144 * count.div_ceil(4) as u64
 }
 
 /// Lays out `bvh` (whose leaves index `tris` through `bvh.order`) in tiles of about `target` bytes.
@@ -31,7 +40,7 @@ pub fn tile_part(bvh: &Bvh4, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
         for kid in nodes[i].kids {
             s += match kid {
                 Kid::Inner(c) => size[c as usize],
-                Kid::Leaf { count, .. } => 36 * count as u64,
+                Kid::Leaf { count, .. } => leaf_bytes(count),
                 Kid::Empty => 0,
             };
         }
@@ -41,7 +50,7 @@ pub fn tile_part(bvh: &Bvh4, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
         128 + nodes[i]
             .kids
             .iter()
-            .map(|k| if let Kid::Leaf { count, .. } = k { 36 * *count as u64 } else { 0 })
+            .map(|k| if let Kid::Leaf { count, .. } = k { leaf_bytes(*count) } else { 0 })
             .sum::<u64>()
     };
 
@@ -92,7 +101,7 @@ pub fn tile_part(bvh: &Bvh4, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
     let mut tiles = Vec::with_capacity(tile_nodes.len());
     let mut tri_source = Vec::with_capacity(tris.len());
     for (t, list) in tile_nodes.iter().enumerate() {
-        let mut blob = TileBlob { nodes: Vec::with_capacity(list.len()), tris: Vec::new() };
+        let mut blob = TileBlob { nodes: Vec::with_capacity(list.len()), blocks: Vec::new() };
         for &n in list {
             let mut out = Node4::EMPTY;
             for (k, kid) in nodes[n as usize].kids.iter().enumerate() {
@@ -106,10 +115,20 @@ pub fn tile_part(bvh: &Bvh4, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
                         }
                     }
                     Kid::Leaf { start, count } => {
-                        let first = blob.tris.len() as u32;
-                        for &p in &bvh.order[start as usize..(start + count) as usize] {
-                            blob.tris.push(Tri { v: tris[p as usize] });
-                            tri_source.push(p);
+                        let first = blob.blocks.len() as u32;
+                        let prims = &bvh.order[start as usize..(start + count) as usize];
+                        for chunk in prims.chunks(4) {
+                            let mut b = Tri4 { v: [[0.0; 4]; 9] };
+                            for lane in 0..4 {
+                                match chunk.get(lane) {
+                                    Some(&p) => {
+                                        b.set(lane, &tris[p as usize]);
+                                        tri_source.push(p);
+                                    }
+                                    None => tri_source.push(PADDING),
+                                }
+                            }
+                            blob.blocks.push(b);
                         }
                         ChildRef::leaf(first, count)
                     }

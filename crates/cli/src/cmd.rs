@@ -25,7 +25,7 @@ fn parse_vec3(s: &str) -> Result<Vec3, String> {
     }
 }
 
-fn parse_res(s: &str) -> Result<(u32, u32), String> {
+pub(crate) fn parse_res(s: &str) -> Result<(u32, u32), String> {
     let err = || format!("`{s}` is not a resolution like 1024x768");
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(err)?;
     let (w, h): (u32, u32) = (w.trim().parse().map_err(|_| err())?, h.trim().parse().map_err(|_| err())?);
@@ -253,13 +253,15 @@ pub fn info(a: InfoArgs) -> Result<()> {
     let tiles = scene.tiles();
     let n = h.tri_count.max(1) as f64;
     let node_bytes: u64 = tiles.iter().map(|t| t.node_count as u64 * 128).sum();
-    let tri_bytes: u64 = tiles.iter().map(|t| t.tri_count as u64 * 36).sum();
+    let tri_bytes: u64 = tiles.iter().map(|t| t.blocks as u64 * 144).sum();
+    let slots: u64 = parts.iter().map(|p| p.slot_count).sum();
+    let fill = h.tri_count as f64 / slots.max(1) as f64;
     let tile_total: u64 = parts.iter().map(|p| p.tile_bytes).sum();
     let padding = tile_total - node_bytes - tri_bytes;
     let attr_bytes: u64 = parts
         .iter()
         .map(|p| {
-            let t = p.tri_count as u64;
+            let t = p.slot_count;
             [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)]
                 .iter()
                 .filter(|(o, _)| *o != 0)
@@ -280,14 +282,14 @@ pub fn info(a: InfoArgs) -> Result<()> {
                 "triangles": h.tri_count, "degenerate_dropped": h.degenerate_dropped,
                 "bounds": {"min": h.bounds.min, "max": h.bounds.max},
                 "parts": h.part_count, "tiles": h.tile_count, "tile_target": h.tile_target,
-                "tile_bytes_mean": tmean, "materials": h.material_count,
+                "tile_bytes_mean": tmean, "materials": h.material_count, "block_fill": fill,
                 "top_depth": h.top_depth, "top_nodes": h.top_node_count,
                 "part_depth_min": dmin, "part_depth_max": dmax,
                 "attributes": {"normals": h.attr_flags & 1 != 0, "uvs": h.attr_flags & 2 != 0,
                                "colors": h.attr_flags & 4 != 0, "materials": h.attr_flags & 8 != 0},
                 "bytes_per_triangle": {
                     "total": h.file_bytes as f64 / n, "nodes": node_bytes as f64 / n,
-                    "triangles": tri_bytes as f64 / n, "tile_padding": padding as f64 / n,
+                    "triangle_blocks": tri_bytes as f64 / n, "tile_padding": padding as f64 / n,
                     "attributes": attr_bytes as f64 / n, "tables": meta as f64 / n,
                 },
                 "verified": a.verify,
@@ -309,7 +311,7 @@ pub fn info(a: InfoArgs) -> Result<()> {
     println!("  materials        {}", h.material_count);
     println!("  file             {} = {:.1} bytes/triangle:", format_size(h.file_bytes), h.file_bytes as f64 / n);
     println!("    nodes          {:.1}", node_bytes as f64 / n);
-    println!("    triangles      {:.1}", tri_bytes as f64 / n);
+    println!("    triangles      {:.1} (blocks of 4, {:.0}% of lanes used)", tri_bytes as f64 / n, 100.0 * fill);
     println!("    tile padding   {:.1}", padding as f64 / n);
     println!("    attributes     {:.1}", attr_bytes as f64 / n);
     println!("    tables, header {:.1}", meta as f64 / n);

@@ -12,8 +12,8 @@ use rayon::prelude::*;
 fn all_tris(scene: &Scene) -> Vec<[Vec3; 3]> {
     let mut out = Vec::new();
     for t in 0..scene.header().tile_count {
-        for tri in scene.tile(t).expect("tile is sound").tris {
-            out.push(tri.v.map(Vec3::from));
+        for (_, tri) in scene.tile(t).expect("tile is sound").triangles() {
+            out.push(tri.map(Vec3::from));
         }
     }
     out
@@ -92,5 +92,38 @@ fn generated_models_match_brute_force() {
         let (scene, s) = build(dir.path(), &[ply], spec, Some(5_000));
         assert!(s.parts > 1);
         check(&scene, s.triangles);
+    }
+}
+
+/// Watertightness: rays from the centre of a closed sphere (the root of a sphere flake)
+/// always hit, whether random or aimed exactly at its vertices and edge midpoints.
+#[test]
+fn rays_from_inside_closed_spheres_always_hit() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = gen(dir.path(), "sphereflake:1");
+    let (scene_path, _) = build(dir.path(), &[ply], "flake1", Some(500));
+    let scene = Scene::open(&scene_path).unwrap();
+    let tracer = Tracer::new(&scene);
+    // The root sphere: radius 1 at the origin; its triangles are the ones within 1.0001 of it.
+    let root: Vec<[Vec3; 3]> =
+        all_tris(&scene).into_iter().filter(|t| t.iter().all(|v| (v.length() - 1.0).abs() < 1e-4)).collect();
+    assert_eq!(root.len(), 4 * 12 * 11, "the root UV sphere");
+    // Points on the sphere's mesh: vertices and edge midpoints, aimed at exactly.
+    let mut targets: Vec<Vec3> = Vec::new();
+    for t in &root {
+        targets.extend([t[0], t[1], t[2], (t[0] + t[1]) * 0.5, (t[1] + t[2]) * 0.5, (t[0] + t[2]) * 0.5]);
+    }
+    let mut rng = Rng(11);
+    let random: Vec<Vec3> = (0..10_000).map(|_| Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5)).collect();
+    for org in [Vec3::ZERO, Vec3::new(0.01, -0.02, 0.005), Vec3::new(-0.3, 0.2, 0.1)] {
+        let dirs = targets.iter().map(|p| *p - org).chain(random.iter().copied());
+        let missed: Vec<usize> =
+            dirs.enumerate().filter(|(_, d)| tracer.intersect(&Ray::new(org, *d)).is_none()).map(|(i, _)| i).collect();
+        assert!(
+            missed.is_empty(),
+            "{} rays from inside slipped through, e.g. {:?}",
+            missed.len(),
+            &missed[..missed.len().min(5)]
+        );
     }
 }

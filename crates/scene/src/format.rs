@@ -10,7 +10,7 @@ use megaray_base::Aabb;
 /// The first eight bytes of every scene file.
 pub const MAGIC: [u8; 8] = *b"MRAYSCN\x1a";
 /// The format version this code writes and reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// Page size: tiles and sections start on multiples of it.
 pub const PAGE: u64 = 4096;
 /// Bytes of the header page (the header struct is followed by zeros up to it).
@@ -129,7 +129,7 @@ impl Node4 {
 /// | bits 63..62 | meaning | payload |
 /// |---|---|---|
 /// | `00` | inner node in the same node array | bits 0..32: node index |
-/// | `01` | leaf: triangles of the same tile | bits 0..32: first triangle, bits 32..40: count (1..=255) |
+/// | `01` | leaf: triangles of the same tile | bits 0..32: first [`Tri4`] block, bits 32..40: triangle count (1..=255) |
 /// | `10` | link: a node in another tile | bits 0..32: tile index, bits 32..62: node index in that tile |
 /// | `11` | part (top-level tree only): the root of a part | bits 0..32: part index |
 ///
@@ -182,19 +182,48 @@ impl ChildRef {
     }
 }
 
-/// One triangle as stored in a tile: its three corners. 36 bytes.
-#[repr(C)]
+/// Four triangles as stored in a tile, structure of arrays, so that one ray is tested
+/// against all four with 4-wide vectors. 144 bytes.
+///
+/// `v[3 * corner + axis][lane]`: e.g. `v[0]` holds the x of corner 0 of lanes 0..4, `v[5]`
+/// the z of corner 1. A leaf of `count` triangles fills `ceil(count / 4)` consecutive blocks;
+/// lanes past `count` in its last block are zero and never tested.
+#[repr(C, align(16))]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
-pub struct Tri {
-    pub v: [[f32; 3]; 3],
+pub struct Tri4 {
+    pub v: [[f32; 4]; 9],
 }
-const _: () = assert!(std::mem::size_of::<Tri>() == 36);
+const _: () = assert!(std::mem::size_of::<Tri4>() == 144);
+
+impl Tri4 {
+    /// The corners of the triangle in `lane`.
+    #[inline]
+    pub fn tri(&self, lane: usize) -> [[f32; 3]; 3] {
+        let v = &self.v;
+        [
+            [v[0][lane], v[1][lane], v[2][lane]],
+            [v[3][lane], v[4][lane], v[5][lane]],
+            [v[6][lane], v[7][lane], v[8][lane]],
+        ]
+    }
+
+    /// Stores `tri` in `lane`.
+    #[inline]
+    pub fn set(&mut self, lane: usize, tri: &[[f32; 3]; 3]) {
+        for (c, corner) in tri.iter().enumerate() {
+            for (k, x) in corner.iter().enumerate() {
+                self.v[3 * c + k][lane] = *x;
+            }
+        }
+    }
+}
 
 /// A part directory entry: one bottom-level BVH over a spatially coherent set of triangles.
 /// 128 bytes.
 ///
-/// A part's triangles are numbered `0..tri_count` in tile order (tile `first_tile` first,
-/// triangles in each tile in order); attribute arrays use the same numbering. Attribute
+/// A part's triangle *slots* (four per [`Tri4`] block, padding lanes included) are numbered
+/// `0..slot_count` in tile order (tile `first_tile` first, blocks in each tile in order, lanes
+/// in order); attribute arrays use the same numbering and hold `slot_count` entries. Attribute
 /// offsets are zero where the part has no such attribute.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -212,33 +241,35 @@ pub struct PartEntry {
     pub node_count: u64,
     /// Bytes of the part's tiles, padding included.
     pub tile_bytes: u64,
-    /// Offset of `tri_count` [`PackedNormals`], or 0.
+    /// Triangle slots: 4 per block (`tri_count` of them hold triangles).
+    pub slot_count: u64,
+    /// Offset of `slot_count` [`PackedNormals`], or 0.
     pub normals_off: u64,
-    /// Offset of `tri_count` `[[f32; 2]; 3]` texture coordinates, or 0.
+    /// Offset of `slot_count` `[[f32; 2]; 3]` texture coordinates, or 0.
     pub uvs_off: u64,
-    /// Offset of `tri_count` `[[u8; 4]; 3]` RGBA colours (linear, 0..255), or 0.
+    /// Offset of `slot_count` `[[u8; 4]; 3]` RGBA colours (linear, 0..255), or 0.
     pub colors_off: u64,
-    /// Offset of `tri_count` `u32` material ids (`u32::MAX`: none), or 0.
+    /// Offset of `slot_count` `u32` material ids (`u32::MAX`: none), or 0.
     pub materials_off: u64,
-    pub reserved: [u64; 3],
+    pub reserved: [u64; 2],
 }
 const _: () = assert!(std::mem::size_of::<PartEntry>() == 128);
 
 /// A tile directory entry. 40 bytes.
 ///
 /// A tile is the unit of paging: a page-aligned block holding `node_count` [`Node4`]s and
-/// then `tri_count` [`Tri`]s (`bytes = 128 * node_count + 36 * tri_count`). Its nodes refer
-/// to each other by index, to its own triangles, and to other tiles through links.
+/// then `blocks` [`Tri4`]s (`bytes = 128 * node_count + 144 * blocks`). Its nodes refer
+/// to each other by index, to its own blocks, and to other tiles through links.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct TileEntry {
     pub offset: u64,
     pub bytes: u32,
     pub node_count: u32,
-    pub tri_count: u32,
+    pub blocks: u32,
     pub part: u32,
-    /// Number (within the part) of the tile's first triangle.
-    pub first_tri: u32,
+    /// Number (within the part) of the tile's first triangle slot (4 per block).
+    pub first_slot: u32,
     pub reserved: u32,
     /// XXH3-64 of the tile's `bytes` bytes.
     pub checksum: u64,

@@ -7,6 +7,7 @@
 //! page 1..      top-level tree (Node4 array) and part directory (PartEntry array)
 //! then          for each part: its tiles (page-aligned blocks of Node4s then Tris),
 //!               then its attribute arrays (normals, uvs, colours, material ids)
+//!               (tiles: Node4s, then Tri4 blocks of four triangles each)
 //! then          tile directory (TileEntry array), material table
 //! ```
 //!
@@ -29,6 +30,6 @@ pub mod reader;
 pub mod writer;
 
 pub use error::{SceneError, SceneErrorKind};
-pub use format::{Child, ChildRef, Header, Node4, PartEntry, TileEntry, Tri};
+pub use format::{Child, ChildRef, Header, Node4, PartEntry, TileEntry, Tri4};
 pub use reader::{Scene, Tile};
 pub use writer::{MaterialDesc, PartBlob, SceneWriter, TileBlob};

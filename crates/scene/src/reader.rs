@@ -27,11 +27,31 @@ pub struct Scene {
     materials: Vec<MaterialDesc>,
 }
 
-/// The nodes and triangles of one tile.
+/// The nodes and triangle blocks of one tile.
 #[derive(Clone, Copy)]
 pub struct Tile<'a> {
     pub nodes: &'a [Node4],
-    pub tris: &'a [Tri],
+    pub blocks: &'a [Tri4],
+}
+
+impl Tile<'_> {
+    /// Every triangle of the tile, as (slot within the tile, corners), walking its leaves
+    /// (padding lanes are not triangles and are skipped).
+    pub fn triangles(&self) -> Vec<(u32, [[f32; 3]; 3])> {
+        let mut out = Vec::new();
+        for n in self.nodes {
+            for c in n.child {
+                if let Child::Leaf { first, count } = ChildRef(c).decode() {
+                    for i in 0..count {
+                        let slot = 4 * first + i;
+                        out.push((slot, self.blocks[(slot / 4) as usize].tri((slot % 4) as usize)));
+                    }
+                }
+            }
+        }
+        out.sort_by_key(|t| t.0);
+        out
+    }
 }
 
 fn range(off: u64, len: u64, file: u64) -> Option<std::ops::Range<usize>> {
@@ -144,19 +164,22 @@ impl Scene {
             {
                 return Err(bad(format!("part {i}: tile range or root out of bounds")));
             }
-            let n = p.tri_count as u64;
+            let n = p.slot_count;
+            if n < p.tri_count as u64 || !n.is_multiple_of(4) {
+                return Err(bad(format!("part {i}: {} slots cannot hold {} triangles", n, p.tri_count)));
+            }
             for (off, size) in [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)] {
                 if off != 0 && (!off.is_multiple_of(4) || range(off, n * size, len).is_none()) {
                     return Err(bad(format!("part {i}: attribute array lies outside the file")));
                 }
             }
-            tri_total += n;
+            tri_total += p.tri_count as u64;
         }
         if tri_total != h.tri_count {
             return Err(bad(format!("parts hold {tri_total} triangles, header says {}", h.tri_count)));
         }
         for (i, t) in tiles.iter().enumerate() {
-            let expect = t.node_count as u64 * 128 + t.tri_count as u64 * 36;
+            let expect = t.node_count as u64 * 128 + t.blocks as u64 * 144;
             let part = self.parts().get(t.part as usize);
             if !t.offset.is_multiple_of(PAGE)
                 || t.bytes as u64 != expect
@@ -164,7 +187,7 @@ impl Scene {
                 || part.is_none_or(|p| {
                     (i as u32) < p.first_tile
                         || i as u64 >= p.first_tile as u64 + p.tile_count as u64
-                        || t.first_tri as u64 + t.tri_count as u64 > p.tri_count as u64
+                        || t.first_slot as u64 + 4 * t.blocks as u64 > p.slot_count
                 })
             {
                 return Err(bad(format!("tile {i}: directory entry out of bounds")));
@@ -233,10 +256,10 @@ impl Scene {
     fn tile_unchecked_view(&self, t: u32) -> Tile<'_> {
         let e = &self.tiles()[t as usize];
         let nodes_end = e.offset as usize + e.node_count as usize * 128;
-        let tris_end = nodes_end + e.tri_count as usize * 36;
+        let blocks_end = nodes_end + e.blocks as usize * 144;
         Tile {
             nodes: bytemuck::cast_slice(&self.map[e.offset as usize..nodes_end]),
-            tris: bytemuck::cast_slice(&self.map[nodes_end..tris_end]),
+            blocks: bytemuck::cast_slice(&self.map[nodes_end..blocks_end]),
         }
     }
 
@@ -256,7 +279,9 @@ impl Scene {
                 let ok = match ChildRef(c).decode() {
                     Child::Empty => true,
                     Child::Inner(k) => (k as usize) < v.nodes.len() && k as usize > i,
-                    Child::Leaf { first, count } => count > 0 && first as u64 + count as u64 <= v.tris.len() as u64,
+                    Child::Leaf { first, count } => {
+                        count > 0 && first as u64 + (count as u64).div_ceil(4) <= v.blocks.len() as u64
+                    }
                     Child::Link { tile, node } => {
                         tiles.get(tile as usize).is_some_and(|o| o.part == e.part && tile != t && node < o.node_count)
                     }
@@ -290,10 +315,10 @@ impl Scene {
         bytemuck::pod_read_unaligned(&self.map[at..at + size])
     }
 
-    /// The vertex normals of triangle `prim` of `part`, if the part has normals.
+    /// The vertex normals of triangle slot `prim` of `part`, if the part has normals.
     pub fn normals(&self, part: u32, prim: u32) -> Option<[[f32; 3]; 3]> {
         let p = self.parts().get(part as usize)?;
-        if p.normals_off == 0 || prim >= p.tri_count {
+        if p.normals_off == 0 || prim as u64 >= p.slot_count {
             return None;
         }
         let w: PackedNormals = self.attr(p.normals_off, prim);
@@ -303,19 +328,19 @@ impl Scene {
     /// The texture coordinates of triangle `prim` of `part`, if any.
     pub fn uvs(&self, part: u32, prim: u32) -> Option<[[f32; 2]; 3]> {
         let p = self.parts().get(part as usize)?;
-        (p.uvs_off != 0 && prim < p.tri_count).then(|| self.attr(p.uvs_off, prim))
+        (p.uvs_off != 0 && (prim as u64) < p.slot_count).then(|| self.attr(p.uvs_off, prim))
     }
 
     /// The RGBA8 vertex colours of triangle `prim` of `part`, if any.
     pub fn colors(&self, part: u32, prim: u32) -> Option<[[u8; 4]; 3]> {
         let p = self.parts().get(part as usize)?;
-        (p.colors_off != 0 && prim < p.tri_count).then(|| self.attr(p.colors_off, prim))
+        (p.colors_off != 0 && (prim as u64) < p.slot_count).then(|| self.attr(p.colors_off, prim))
     }
 
     /// The material of triangle `prim` of `part`, if any.
     pub fn material(&self, part: u32, prim: u32) -> Option<&MaterialDesc> {
         let p = self.parts().get(part as usize)?;
-        if p.materials_off == 0 || prim >= p.tri_count {
+        if p.materials_off == 0 || prim as u64 >= p.slot_count {
             return None;
         }
         let id: u32 = self.attr(p.materials_off, prim);

@@ -16,21 +16,24 @@ use crate::format::*;
 #[derive(Clone, Debug, Default)]
 pub struct TileBlob {
     pub nodes: Vec<Node4>,
-    pub tris: Vec<Tri>,
+    pub blocks: Vec<Tri4>,
 }
 
 impl TileBlob {
-    /// Bytes of the tile's payload (nodes then triangles), without page padding.
+    /// Bytes of the tile's payload (nodes then triangle blocks), without page padding.
     pub fn bytes(&self) -> u64 {
-        (self.nodes.len() * 128 + self.tris.len() * 36) as u64
+        (self.nodes.len() * 128 + self.blocks.len() * 144) as u64
     }
 }
 
 /// One part as the builder produces it. Links in its nodes name tiles by their index
-/// in `tiles` (the writer turns them into file-wide tile numbers).
+/// in `tiles` (the writer turns them into file-wide tile numbers). Attribute arrays have
+/// one entry per triangle slot (4 per block).
 #[derive(Clone, Debug, Default)]
 pub struct PartBlob {
     pub bounds: Aabb,
+    /// Triangles in the part (not counting padding lanes).
+    pub tri_count: u64,
     pub depth: u32,
     pub tiles: Vec<TileBlob>,
     pub root_tile: u32,
@@ -42,8 +45,9 @@ pub struct PartBlob {
 }
 
 impl PartBlob {
-    pub fn tri_count(&self) -> u64 {
-        self.tiles.iter().map(|t| t.tris.len() as u64).sum()
+    /// Triangle slots: 4 per block.
+    pub fn slot_count(&self) -> u64 {
+        self.tiles.iter().map(|t| 4 * t.blocks.len() as u64).sum()
     }
 }
 
@@ -128,8 +132,17 @@ impl SceneWriter {
     pub fn append_part(&mut self, index: u32, part: PartBlob) -> Result<(), SceneError> {
         assert!(index < self.part_count && self.parts[index as usize].is_none());
         let first_tile = self.tiles.len() as u32;
-        let tri_count = part.tri_count();
-        let mut first_tri = 0u32;
+        let tri_count = part.tri_count;
+        let slot_count = part.slot_count();
+        for (what, n) in [
+            ("normals", part.normals.as_ref().map(|a| a.len())),
+            ("uvs", part.uvs.as_ref().map(|a| a.len())),
+            ("colors", part.colors.as_ref().map(|a| a.len())),
+            ("materials", part.materials.as_ref().map(|a| a.len())),
+        ] {
+            assert!(n.is_none_or(|n| n as u64 == slot_count), "part {index}: {what} array is not one per slot");
+        }
+        let mut first_slot = 0u32;
         let start = self.cursor;
         let mut node_count = 0u64;
         let mut buf: Vec<u8> = Vec::new();
@@ -144,19 +157,19 @@ impl SceneWriter {
                 }
                 buf.extend_from_slice(bytemuck::bytes_of(&n));
             }
-            buf.extend_from_slice(bytemuck::cast_slice(&tile.tris));
+            buf.extend_from_slice(bytemuck::cast_slice(&tile.blocks));
             let entry = TileEntry {
                 offset: self.cursor,
                 bytes: buf.len() as u32,
                 node_count: tile.nodes.len() as u32,
-                tri_count: tile.tris.len() as u32,
+                blocks: tile.blocks.len() as u32,
                 part: index,
-                first_tri,
+                first_slot,
                 reserved: 0,
                 checksum: xxhash_rust::xxh3::xxh3_64(&buf),
             };
             node_count += tile.nodes.len() as u64;
-            first_tri += tile.tris.len() as u32;
+            first_slot += 4 * tile.blocks.len() as u32;
             let len = buf.len() as u64;
             buf.resize(page_up(len) as usize, 0);
             let off = self.cursor;
@@ -176,11 +189,12 @@ impl SceneWriter {
             first_prim: 0, // set in part order by `finish`
             node_count,
             tile_bytes,
+            slot_count,
             normals_off: 0,
             uvs_off: 0,
             colors_off: 0,
             materials_off: 0,
-            reserved: [0; 3],
+            reserved: [0; 2],
         };
         if let Some(a) = &part.normals {
             entry.normals_off = self.append_attr(bytemuck::cast_slice(a))?;

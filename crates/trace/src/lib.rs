@@ -20,8 +20,8 @@
 //! ```
 
 use glam::Vec4;
-use megaray_base::{Ray, Vec3, WatertightRay};
-use megaray_scene::format::{Child, ChildRef, Node4};
+use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
+use megaray_scene::format::{Child, ChildRef, Node4, Tri4};
 use megaray_scene::{Scene, Tile};
 
 /// A closest hit.
@@ -35,7 +35,7 @@ pub struct Hit {
     pub v: f32,
     /// The part the triangle belongs to.
     pub part: u32,
-    /// The triangle's number within its part (indexes the part's attributes).
+    /// The triangle's slot within its part (indexes the part's attributes).
     pub prim: u32,
     /// The triangle's corners.
     pub tri: [[f32; 3]; 3],
@@ -105,6 +105,94 @@ impl RayBox {
     }
 }
 
+/// Per-ray constants of the 4-wide watertight test (the lanes of a [`Tri4`] block at once).
+/// Each lane computes exactly what [`WatertightRay::intersect`] computes, operation for
+/// operation, so results are bit-identical to the scalar reference.
+struct RayTri4 {
+    wt: WatertightRay,
+    o: [Vec4; 3],
+    s: [Vec4; 3],
+    t_min: Vec4,
+}
+
+impl RayTri4 {
+    fn new(r: &Ray) -> RayTri4 {
+        let wt = WatertightRay::new(r);
+        let [kx, ky, kz] = wt.k;
+        RayTri4 {
+            o: [Vec4::splat(wt.org[kx]), Vec4::splat(wt.org[ky]), Vec4::splat(wt.org[kz])],
+            s: wt.s.map(Vec4::splat),
+            t_min: Vec4::splat(r.t_min),
+            wt,
+        }
+    }
+
+    /// The nearest hit among the lanes of `b` set in `lanes`, in `[t_min, t_max)`.
+    #[inline(always)]
+    fn test(&self, b: &Tri4, lanes: u32, t_max: f32) -> Option<(usize, TriHit)> {
+        let [kx, ky, kz] = self.wt.k;
+        let [ox, oy, oz] = self.o;
+        let [sx, sy, sz] = self.s;
+        let v = |c: usize, k: usize| Vec4::from_array(b.v[3 * c + k]);
+        let az = v(0, kz) - oz;
+        let bz = v(1, kz) - oz;
+        let cz = v(2, kz) - oz;
+        let ax = (v(0, kx) - ox) - sx * az;
+        let ay = (v(0, ky) - oy) - sy * az;
+        let bx = (v(1, kx) - ox) - sx * bz;
+        let by = (v(1, ky) - oy) - sy * bz;
+        let cx = (v(2, kx) - ox) - sx * cz;
+        let cy = (v(2, ky) - oy) - sy * cz;
+        let u = cx * by - cy * bx;
+        let vv = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        let zero =
+            (u.cmpeq(Vec4::ZERO).bitmask() | vv.cmpeq(Vec4::ZERO).bitmask() | w.cmpeq(Vec4::ZERO).bitmask()) & lanes;
+        if zero != 0 {
+            // An edge or vertex exactly on the ray: the reference's double-precision path.
+            return self.scalar(b, lanes, t_max);
+        }
+        let neg = u.cmplt(Vec4::ZERO).bitmask() | vv.cmplt(Vec4::ZERO).bitmask() | w.cmplt(Vec4::ZERO).bitmask();
+        let pos = u.cmpgt(Vec4::ZERO).bitmask() | vv.cmpgt(Vec4::ZERO).bitmask() | w.cmpgt(Vec4::ZERO).bitmask();
+        let det = u + vv + w;
+        let t_scaled = u * (sz * az) + vv * (sz * bz) + w * (sz * cz);
+        let inv_det = Vec4::ONE / det;
+        let t = t_scaled * inv_det;
+        let ok = lanes
+            & !(neg & pos)
+            & !det.cmpeq(Vec4::ZERO).bitmask()
+            & t.cmpge(self.t_min).bitmask()
+            & t.cmplt(Vec4::splat(t_max)).bitmask();
+        if ok == 0 {
+            return None;
+        }
+        let mut lane = ok.trailing_zeros() as usize;
+        let mut rest = ok & (ok - 1);
+        while rest != 0 {
+            let l = rest.trailing_zeros() as usize;
+            rest &= rest - 1;
+            if t[l] < t[lane] {
+                lane = l;
+            }
+        }
+        Some((lane, TriHit { t: t[lane], u: vv[lane] * inv_det[lane], v: w[lane] * inv_det[lane] }))
+    }
+
+    /// The reference test lane by lane.
+    fn scalar(&self, b: &Tri4, lanes: u32, mut t_max: f32) -> Option<(usize, TriHit)> {
+        let mut best = None;
+        for lane in 0..4 {
+            if lanes & (1 << lane) != 0 {
+                if let Some(h) = self.wt.intersect(&b.tri(lane), t_max) {
+                    t_max = h.t;
+                    best = Some((lane, h));
+                }
+            }
+        }
+        best
+    }
+}
+
 /// Traces rays through one scene. Cheap to create; share one across threads.
 pub struct Tracer<'s> {
     scene: &'s Scene,
@@ -116,7 +204,7 @@ struct Cursor<'s> {
     nodes: &'s [Node4],
     tile: Option<Tile<'s>>,
     part: u32,
-    first_tri: u32,
+    first_slot: u32,
 }
 
 impl<'s> Tracer<'s> {
@@ -143,7 +231,7 @@ impl<'s> Tracer<'s> {
             c.nodes = t.nodes;
             c.tile = Some(t);
             c.part = e.part;
-            c.first_tri = e.first_tri;
+            c.first_slot = e.first_slot;
         }
         c.arr = arr;
         true
@@ -175,7 +263,7 @@ impl<'s> Tracer<'s> {
 
     fn traverse(&self, ray: &Ray, any: bool) -> Option<Hit> {
         let rb = RayBox::new(ray);
-        let wt = WatertightRay::new(ray);
+        let rt = RayTri4::new(ray);
         let mut best: Option<Hit> = None;
         let mut t_best = ray.t_max;
         let mut stack = [Entry { arr: TOP, node: 0, t: 0.0 }; STACK];
@@ -183,7 +271,7 @@ impl<'s> Tracer<'s> {
         // Entries beyond the fixed stack (only for pathologically deep trees; order does not
         // matter for correctness, only for speed).
         let mut spill: Vec<Entry> = Vec::new();
-        let mut c = Cursor { arr: TOP, nodes: self.scene.top_nodes(), tile: None, part: 0, first_tri: 0 };
+        let mut c = Cursor { arr: TOP, nodes: self.scene.top_nodes(), tile: None, part: 0, first_slot: 0 };
         loop {
             let e = if sp > 0 {
                 sp -= 1;
@@ -210,15 +298,21 @@ impl<'s> Tracer<'s> {
                 let child = node.child[k];
                 if let Child::Leaf { first, count } = ChildRef(child).decode() {
                     let tile = c.tile.expect("leaves live in tiles");
-                    for i in first..first + count {
-                        let tri = &tile.tris[i as usize].v;
-                        if let Some(h) = wt.intersect(tri, t_best) {
+                    let mut left = count;
+                    let mut blk = first;
+                    while left > 0 {
+                        let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
+                        let b = &tile.blocks[blk as usize];
+                        if let Some((lane, h)) = rt.test(b, lanes, t_best) {
                             t_best = h.t;
-                            best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim: c.first_tri + i, tri: *tri });
+                            let prim = c.first_slot + 4 * blk + lane as u32;
+                            best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: b.tri(lane) });
                             if any {
                                 return best;
                             }
                         }
+                        left = left.saturating_sub(4);
+                        blk += 1;
                     }
                     continue;
                 }
@@ -250,5 +344,64 @@ impl<'s> Tracer<'s> {
             }
         }
         best
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Rng(u64);
+    impl Rng {
+        fn f(&mut self) -> f32 {
+            self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        }
+        fn v(&mut self) -> Vec3 {
+            Vec3::new(self.f(), self.f(), self.f())
+        }
+    }
+
+    /// The 4-wide triangle test gives exactly the scalar reference's hits, on random rays and
+    /// on rays aimed exactly at vertices and edge midpoints.
+    #[test]
+    fn block_test_equals_scalar_reference() {
+        let mut rng = Rng(3);
+        let mut checked = 0;
+        for _ in 0..2000 {
+            let mut b = Tri4 { v: [[0.0; 4]; 9] };
+            let tris: Vec<[[f32; 3]; 3]> = (0..4).map(|_| [rng.v().into(), rng.v().into(), rng.v().into()]).collect();
+            for (l, t) in tris.iter().enumerate() {
+                b.set(l, t);
+            }
+            let org = rng.v() * 3.0;
+            let mut targets = vec![rng.v() * 0.5];
+            for t in &tris {
+                let [a, bb, c] = t.map(Vec3::from);
+                targets.extend([a, bb, c, (a + bb) * 0.5, (bb + c) * 0.5, (a + c) * 0.5]);
+            }
+            for target in targets {
+                let ray = Ray::new(org, target - org);
+                let rt = RayTri4::new(&ray);
+                for lanes in [0b1111u32, 0b0111, 0b0001] {
+                    let got = rt.test(&b, lanes, f32::INFINITY);
+                    let want = rt.scalar(&b, lanes, f32::INFINITY);
+                    assert_eq!(got.map(|g| g.1), want.map(|w| w.1), "ray {ray:?} lanes {lanes:b}");
+                    // And the scalar lane test is the base reference itself.
+                    let mut best: Option<TriHit> = None;
+                    for (l, t) in tris.iter().enumerate() {
+                        if lanes & (1 << l) != 0 {
+                            let t_max = best.map_or(f32::INFINITY, |h| h.t);
+                            if let Some(h) = megaray_base::intersect_triangle(&ray, t.map(Vec3::from), t_max) {
+                                best = Some(h);
+                            }
+                        }
+                    }
+                    assert_eq!(want.map(|w| w.1), best);
+                    checked += 1;
+                }
+            }
+        }
+        assert!(checked > 10_000);
     }
 }
