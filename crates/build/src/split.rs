@@ -68,7 +68,7 @@ pub fn split(
     }
     check_cancel(opts)?;
     let (plan, leaves, depth) = make_plan(&s, limit, opts.split_fanout.max(2));
-    let children = route(&s, &plan, leaves, depth, io, progress)?;
+    let children = route(&s, &plan, leaves, depth, opts, io, progress)?;
     std::fs::remove_file(&s.path).map_err(|e| BuildError::io(&s.path, "remove", e))?;
     use rayon::prelude::*;
     let parts: Vec<Vec<StreamFile>> = children
@@ -199,6 +199,7 @@ fn route(
     plan: &[Plan],
     leaves: u32,
     depth: u32,
+    opts: &BuildOptions,
     io: &IoCount,
     progress: &dyn Progress,
 ) -> Result<Vec<StreamFile>, BuildError> {
@@ -211,6 +212,7 @@ fn route(
     let mut buf = vec![StreamTri { v: [[0.0; 3]; 3], reserved: 0, id: 0 }; CHUNK];
     let mut k = 0u64;
     loop {
+        check_cancel(opts)?;
         let n = r.read(&mut buf)?;
         if n == 0 {
             break;

@@ -103,3 +103,38 @@ fn malformed_models_fail_cleanly() {
         assert!(!out.exists());
     }
 }
+
+/// Ctrl-C during a build: the build stops with an error and removes its temporary files.
+#[test]
+fn interrupted_build_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = gen(dir.path(), "plant:3M");
+    let out = dir.path().join("big.mray");
+    let child = std::process::Command::new(bin())
+        .args(["build", ply.to_str().unwrap(), "-o", out.to_str().unwrap(), "--build-mem", "130M"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the build has started writing temporary files, then interrupt it.
+    let started = std::time::Instant::now();
+    let temp_exists = || {
+        std::fs::read_dir(dir.path()).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().starts_with(".megaray"))
+    };
+    while !temp_exists() && started.elapsed().as_secs() < 20 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    let killed = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    let res = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&res.stderr);
+    if res.status.success() {
+        // The build won the race: it finished before the signal arrived. Nothing to check.
+        assert!(out.exists());
+        return;
+    }
+    assert_eq!(res.status.code(), Some(1), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    assert!(!out.exists());
+    assert!(!temp_exists(), "temporary files left after Ctrl-C");
+}
