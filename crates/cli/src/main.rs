@@ -2,6 +2,7 @@
 //! option structs, draws progress bars and prints results. Everything else lives in the
 //! crates (`megaray-gen`, `-import`, `-build`, `-scene`, `-trace`, `-render`).
 
+mod bench;
 mod cmd;
 mod progress;
 
@@ -49,6 +50,35 @@ enum Command {
     Info(cmd::InfoArgs),
     /// Generate a power plant, build it out of core, render it: the whole pipeline.
     Demo(cmd::DemoArgs),
+    /// Measure ray and build throughput, in lines comparable with the Embree peer harness.
+    ///
+    /// Same scenes, camera, ray sets, timing and checksums as shared/peers/embree (definitions
+    /// in shared/BENCH.md): rays through pixel centres of a 60 degree camera looking at the
+    /// bounding-box centre; per figure a warm-up pass, then --reps repetitions lasting at least
+    /// --min-ms each, median reported. Figures on stdout, progress and notes on stderr.
+    ///
+    /// Kinds:
+    ///   primary_1    one camera ray per pixel, one at a time (32x32 pixel tiles per thread)
+    ///   primary_16   4x4 pixel packets (primary_8: 8x1; not measured unless asked for)
+    ///   shadow_1     one any-hit ray per primary hit toward the light normalize(0.5, 1, 0.8)
+    ///   diffuse_1    one cosine-distributed ray per primary hit (the peer's random numbers)
+    ///   build        the in-core builder on the triangles in memory (pairs with the peer's
+    ///                build_medium); median of 3 builds after a warm-up
+    /// hits and sum_t are checksums: they must agree with the peer's for the speeds to compare.
+    ///
+    /// Examples:
+    ///   megaray bench grid:1000                               all default kinds, 1 and 2 threads
+    ///   megaray bench ../shared/models/stanford-bunny.obj --cam close --kinds primary_1,shadow_1
+    ///   megaray bench scene.mray --threads 2 --reps 3 --min-ms 100
+    ///   megaray bench sphereflake:4 --json >> megaray.jsonl
+    ///
+    /// Comparing with the peer (its figures in ../shared/peers/embree/results):
+    ///   megaray bench ../shared/models/stanford-bunny.obj --name stanford-bunny.obj --json > megaray.jsonl
+    ///   python3 ../shared/bench/compare.py ../shared/peers/embree/results/*.jsonl -- megaray.jsonl
+    /// bench/run_suite.sh runs the whole standard suite and the comparison. Run both harnesses
+    /// within minutes of each other on an idle machine, and quote ratios, not absolute figures.
+    #[command(verbatim_doc_comment)]
+    Bench(bench::BenchArgs),
 }
 
 fn main() {
@@ -60,6 +90,7 @@ fn main() {
         Command::Render(a) => cmd::render(a, &bars),
         Command::Info(a) => cmd::info(a),
         Command::Demo(a) => cmd::demo(a, &bars),
+        Command::Bench(a) => bench::bench(a, &bars),
     };
     if let Err(e) = res {
         use megaray_base::Progress;
