@@ -52,7 +52,7 @@ impl Hit {
 /// Which node array a stack entry refers to.
 const TOP: u32 = u32::MAX;
 /// Capacity of the traversal stack kept on the machine stack.
-const STACK: usize = 512;
+const STACK: usize = 32;
 
 /// Conservative widening of box exit distances so that boxes never cull a hit that the
 /// watertight triangle test would find (Ize 2013: 1 + 2 gamma(3)).
@@ -263,7 +263,9 @@ impl<'s> Tracer<'s> {
 
     fn traverse(&self, ray: &Ray, any: bool) -> Option<Hit> {
         let rb = RayBox::new(ray);
-        let rt = RayTri4::new(ray);
+        // The triangle test's constants, made when the ray first reaches a leaf (most rays
+        // of a wide view never do).
+        let mut rt: Option<RayTri4> = None;
         let mut best: Option<Hit> = None;
         let mut t_best = ray.t_max;
         let mut stack = [Entry { arr: TOP, node: 0, t: 0.0 }; STACK];
@@ -298,6 +300,7 @@ impl<'s> Tracer<'s> {
                 let child = node.child[k];
                 if let Child::Leaf { first, count } = ChildRef(child).decode() {
                     let tile = c.tile.expect("leaves live in tiles");
+                    let rt = rt.get_or_insert_with(|| RayTri4::new(ray));
                     let mut left = count;
                     let mut blk = first;
                     while left > 0 {
