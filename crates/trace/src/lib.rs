@@ -22,7 +22,7 @@
 use glam::Vec4;
 use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
 use megaray_scene::format::{Child, ChildRef, Node4, Tri4};
-use megaray_scene::{Scene, Tile};
+use megaray_scene::{PartEntry, Scene, Tile, TileEntry};
 
 /// A closest hit.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -196,6 +196,10 @@ impl RayTri4 {
 /// Traces rays through one scene. Cheap to create; share one across threads.
 pub struct Tracer<'s> {
     scene: &'s Scene,
+    // The scene's tables, looked up once rather than at every tile crossing.
+    top: &'s [Node4],
+    parts: &'s [PartEntry],
+    tiles: &'s [TileEntry],
 }
 
 /// Traversal state kept between node visits: the tile currently open.
@@ -209,7 +213,7 @@ struct Cursor<'s> {
 
 impl<'s> Tracer<'s> {
     pub fn new(scene: &'s Scene) -> Tracer<'s> {
-        Tracer { scene }
+        Tracer { scene, top: scene.top_nodes(), parts: scene.parts(), tiles: scene.tiles() }
     }
 
     pub fn scene(&self) -> &'s Scene {
@@ -223,11 +227,11 @@ impl<'s> Tracer<'s> {
             return true;
         }
         if arr == TOP {
-            c.nodes = self.scene.top_nodes();
+            c.nodes = self.top;
             c.tile = None;
         } else {
             let Some(t) = self.scene.tile(arr) else { return false };
-            let e = &self.scene.tiles()[arr as usize];
+            let e = &self.tiles[arr as usize];
             c.nodes = t.nodes;
             c.tile = Some(t);
             c.part = e.part;
@@ -238,7 +242,7 @@ impl<'s> Tracer<'s> {
     }
 
     fn part_root(&self, p: u32) -> Entry {
-        let e = &self.scene.parts()[p as usize];
+        let e = &self.parts[p as usize];
         Entry { arr: e.root_tile, node: e.root_node, t: 0.0 }
     }
 
@@ -273,7 +277,7 @@ impl<'s> Tracer<'s> {
         // Entries beyond the fixed stack (only for pathologically deep trees; order does not
         // matter for correctness, only for speed).
         let mut spill: Vec<Entry> = Vec::new();
-        let mut c = Cursor { arr: TOP, nodes: self.scene.top_nodes(), tile: None, part: 0, first_slot: 0 };
+        let mut c = Cursor { arr: TOP, nodes: self.top, tile: None, part: 0, first_slot: 0 };
         loop {
             let e = if sp > 0 {
                 sp -= 1;
