@@ -127,3 +127,60 @@ fn rays_from_inside_closed_spheres_always_hit() {
         );
     }
 }
+
+/// The packet kernel, on every instruction set this machine has, gives the single-ray
+/// kernel's distances: for coherent camera packets and for packets of random rays.
+#[test]
+fn packet_kernels_equal_single_rays() {
+    use megaray_trace::packet::Isa;
+    let dir = tempfile::tempdir().unwrap();
+    let ply = gen(dir.path(), "plant:40k");
+    let (scene_path, _) = build(dir.path(), &[model("stanford-bunny.obj"), ply], "mixed", Some(15_000));
+    let scene = Scene::open(&scene_path).unwrap();
+    let tracer = Tracer::new(&scene);
+    let b = scene.header().bounds;
+    let mut packets: Vec<Vec<Ray>> = Vec::new();
+    for off in [megaray_render::DEFAULT_OFFSET, megaray_render::CLOSE_OFFSET, Vec3::new(0.3, -0.2, 0.25)] {
+        let cam = megaray_render::Camera::framing(&b, off, 128, 128);
+        for py in (0..128).step_by(4) {
+            for px in (0..128).step_by(4) {
+                let p: Vec<Ray> =
+                    (0..16).map(|i| cam.ray((px + i % 4) as f32 + 0.5, (py + i / 4) as f32 + 0.5)).collect();
+                packets.push(p);
+            }
+        }
+    }
+    let mut rng = Rng(5);
+    let (lo, ext) = (b.lo(), b.extent());
+    for k in 0..400 {
+        // Incoherent packets, some shorter than 16, some with limited t_max.
+        let n = 1 + k % 16;
+        packets.push(
+            (0..n)
+                .map(|_| {
+                    let o = lo + ext * Vec3::new(rng.f32(), rng.f32(), rng.f32());
+                    let mut r = Ray::new(o, Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5));
+                    if k % 3 == 0 {
+                        r.t_max = rng.f32() * 0.3;
+                    }
+                    r
+                })
+                .collect(),
+        );
+    }
+    let isas = Isa::available();
+    assert!(isas.contains(&Isa::Baseline));
+    let mut compared = 0;
+    for isa in isas {
+        for p in &packets {
+            let mut hits = vec![None; p.len()];
+            tracer.intersect_packet_with(p, &mut hits, isa);
+            for (r, h) in p.iter().zip(&hits) {
+                let want = tracer.intersect(r);
+                assert_eq!(h.map(|h| h.t), want.map(|w| w.t), "{isa:?}: ray {r:?}");
+                compared += 1;
+            }
+        }
+    }
+    assert!(compared > 40_000);
+}

@@ -19,6 +19,8 @@
 //! }
 //! ```
 
+pub mod packet;
+
 use glam::Vec4;
 use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
 use megaray_scene::format::{Child, ChildRef, Node4, Tri4};
@@ -100,7 +102,9 @@ impl RayBox {
         let (ny, fy) = axis(&n.lo_y, &n.hi_y, 1);
         let (nz, fz) = axis(&n.lo_z, &n.hi_z, 2);
         let near = nx.max(ny).max(nz).max(Vec4::splat(t0));
-        let far = (fx.min(fy).min(fz) * BOX_EPS).min(Vec4::splat(t1));
+        // Both the box's exit and the current closest hit are widened: a box's entry distance
+        // may round up past the distance of a hit inside it.
+        let far = fx.min(fy).min(fz).min(Vec4::splat(t1)) * BOX_EPS;
         (near, near.cmple(far).bitmask())
     }
 }
@@ -252,11 +256,20 @@ impl<'s> Tracer<'s> {
     }
 
     /// The closest hits of a packet of rays (coherent ones, such as 4x4 pixels), into `hits`
-    /// (same length as `rays`). Exactly the results of [`Tracer::intersect`] on each ray.
+    /// (same length as `rays`), traced 16 at a time by the packet kernel ([`packet`]) on the
+    /// best instruction set of this machine. Exactly the distances of [`Tracer::intersect`]
+    /// on each ray.
     pub fn intersect_packet(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        self.intersect_packet_with(rays, hits, packet::Isa::detect());
+    }
+
+    /// [`Tracer::intersect_packet`] on a chosen instruction set (one of
+    /// [`packet::Isa::available`]); for tests and benchmarks.
+    pub fn intersect_packet_with(&self, rays: &[Ray], hits: &mut [Option<Hit>], isa: packet::Isa) {
         assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
-        for (r, h) in rays.iter().zip(hits.iter_mut()) {
-            *h = self.intersect(r);
+        assert!(packet::Isa::available().contains(&isa), "{isa:?} is not available on this machine");
+        for (r, h) in rays.chunks(packet::WIDTH).zip(hits.chunks_mut(packet::WIDTH)) {
+            packet::intersect16(self, r, h, isa);
         }
     }
 
@@ -287,7 +300,7 @@ impl<'s> Tracer<'s> {
             } else {
                 break;
             };
-            if e.t >= t_best {
+            if e.t > t_best * BOX_EPS {
                 continue;
             }
             if !self.open(&mut c, e.arr) {
@@ -333,7 +346,7 @@ impl<'s> Tracer<'s> {
                 nh += 1;
             }
             for &(d, child) in &hits[..nh] {
-                if d >= t_best {
+                if d > t_best * BOX_EPS {
                     continue;
                 }
                 let entry = match ChildRef(child).decode() {
