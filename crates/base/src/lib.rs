@@ -25,6 +25,24 @@ pub use progress::{NoProgress, Progress};
 pub use ray::{intersect_triangle, Ray, TriHit, WatertightRay};
 pub use size::{format_size, parse_size};
 
+/// The lowbias32 integer hash: deterministic per-pixel random numbers (the Embree peer
+/// harness uses the same one, so ray sets can be compared).
+#[inline]
+pub fn hash32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^= x >> 16;
+    x
+}
+
+/// A hash as a float in `[0, 1)` (its top 24 bits).
+#[inline]
+pub fn u01(h: u32) -> f32 {
+    (h >> 8) as f32 * (1.0 / 16_777_216.0)
+}
+
 /// This process's peak resident set size in bytes (`VmHWM` of `/proc/self/status`), where the
 /// system reports it (Linux); `None` elsewhere.
 pub fn peak_rss() -> Option<u64> {

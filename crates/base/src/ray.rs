@@ -35,67 +35,7 @@ pub struct TriHit {
 /// tested against it.
 #[inline]
 pub fn intersect_triangle(ray: &Ray, tri: [Vec3; 3], t_max: f32) -> Option<TriHit> {
-    let d = ray.dir;
-    // Permute axes so that kz is the dominant direction axis.
-    let ad = d.abs();
-    let kz = if ad.x > ad.y {
-        if ad.x > ad.z {
-            0
-        } else {
-            2
-        }
-    } else if ad.y > ad.z {
-        1
-    } else {
-        2
-    };
-    let mut kx = (kz + 1) % 3;
-    let mut ky = (kx + 1) % 3;
-    if d[kz] < 0.0 {
-        std::mem::swap(&mut kx, &mut ky);
-    }
-    let sz = 1.0 / d[kz];
-    let sx = d[kx] * sz;
-    let sy = d[ky] * sz;
-
-    let a = tri[0] - ray.org;
-    let b = tri[1] - ray.org;
-    let c = tri[2] - ray.org;
-    let ax = a[kx] - sx * a[kz];
-    let ay = a[ky] - sy * a[kz];
-    let bx = b[kx] - sx * b[kz];
-    let by = b[ky] - sy * b[kz];
-    let cx = c[kx] - sx * c[kz];
-    let cy = c[ky] - sy * c[kz];
-
-    let mut u = cx * by - cy * bx;
-    let mut v = ax * cy - ay * cx;
-    let mut w = bx * ay - by * ax;
-    if u == 0.0 || v == 0.0 || w == 0.0 {
-        // Fall back to double precision on edges, as the paper does.
-        let (axd, ayd, bxd, byd, cxd, cyd) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
-        u = (cxd * byd - cyd * bxd) as f32;
-        v = (axd * cyd - ayd * cxd) as f32;
-        w = (bxd * ayd - byd * axd) as f32;
-    }
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-        return None;
-    }
-    let det = u + v + w;
-    if det == 0.0 {
-        return None;
-    }
-    let az = sz * a[kz];
-    let bz = sz * b[kz];
-    let cz = sz * c[kz];
-    let t_scaled = u * az + v * bz + w * cz;
-    let inv_det = 1.0 / det;
-    let t = t_scaled * inv_det;
-    if !(t >= ray.t_min && t < t_max) {
-        return None;
-    }
-    // u weights a, v weights b, w weights c in the paper's naming; report corner weights 1 and 2.
-    Some(TriHit { t, u: v * inv_det, v: w * inv_det })
+    WatertightRay::new(ray).intersect(&tri.map(Into::into), t_max)
 }
 
 #[cfg(test)]
@@ -142,8 +82,9 @@ mod tests {
     }
 }
 
-/// Per-ray constants of the watertight test, computed once per ray ([`WatertightRay::new`]) and
-/// reused for every triangle the ray meets. Gives exactly the results of [`intersect_triangle`].
+/// The scalar watertight test split in two: per-ray constants computed once
+/// ([`WatertightRay::new`]: the dominant axis and the shear) and reused for every triangle the
+/// ray meets ([`WatertightRay::intersect`]). [`intersect_triangle`] is the two in one call.
 #[derive(Clone, Copy, Debug)]
 pub struct WatertightRay {
     pub org: [f32; 3],

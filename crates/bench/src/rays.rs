@@ -29,22 +29,7 @@ fn normalize(v: Vec3) -> Vec3 {
     }
 }
 
-/// The lowbias32 integer hash.
-#[inline]
-pub fn hash32(mut x: u32) -> u32 {
-    x ^= x >> 16;
-    x = x.wrapping_mul(0x7feb_352d);
-    x ^= x >> 15;
-    x = x.wrapping_mul(0x846c_a68b);
-    x ^= x >> 16;
-    x
-}
-
-/// A hash as a float in `[0, 1)` (its top 24 bits).
-#[inline]
-pub fn u01(h: u32) -> f32 {
-    (h >> 8) as f32 * (1.0 / 16_777_216.0)
-}
+pub use megaray_base::{hash32, u01};
 
 /// The cosine-distributed direction around the unit normal `n` of pixel `p` (`y * W + x`).
 pub fn diffuse_dir(p: u32, n: Vec3) -> Vec3 {

@@ -21,7 +21,7 @@ mod image_out;
 pub use camera::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use image_out::{Image, ImageError};
 
-use megaray_base::{Ray, Vec3};
+use megaray_base::{hash32, u01, Ray, Vec3};
 use megaray_trace::{Hit, Tracer};
 use rayon::prelude::*;
 
@@ -50,22 +50,6 @@ impl RenderSettings {
     pub fn new(camera: Camera) -> RenderSettings {
         RenderSettings { camera, light: default_light(), spp: 1, sky: [0.55, 0.7, 0.9], ambient: 0.12, eps_scale: 1e-4 }
     }
-}
-
-/// Hash-based random numbers: deterministic per pixel and sample (lowbias32).
-#[inline]
-fn hash32(mut x: u32) -> u32 {
-    x ^= x >> 16;
-    x = x.wrapping_mul(0x7feb_352d);
-    x ^= x >> 15;
-    x = x.wrapping_mul(0x846c_a68b);
-    x ^= x >> 16;
-    x
-}
-
-#[inline]
-fn u01(h: u32) -> f32 {
-    (h >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
 /// Renders one image. Uses the current rayon pool (install one to choose the thread count).
