@@ -25,7 +25,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Generate a procedural model as a binary PLY (streamed, bounded memory).
+    /// Generate a procedural model as a binary PLY (streamed, bounded memory)
     ///
     /// SPEC is one of:
     ///   grid:N              height field, 2*N*N triangles (as the Embree peer harness)
@@ -50,7 +50,7 @@ enum Command {
     Info(cmd::InfoArgs),
     /// Generate a power plant, build it out of core, render it: the whole pipeline.
     Demo(cmd::DemoArgs),
-    /// Measure ray and build throughput, in lines comparable with the Embree peer harness.
+    /// Measure ray and build throughput, in lines comparable with the Embree peer harness
     ///
     /// Same scenes, camera, ray sets, timing and checksums as shared/peers/embree (definitions
     /// in shared/BENCH.md): rays through pixel centres of a 60 degree camera looking at the
