@@ -336,6 +336,9 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
                 on(Event::Info(format!("{kind}: no primary hits, so no rays: skipped")));
                 continue;
             }
+            if megaray_trace::stats::ENABLED {
+                pool.broadcast(|_| megaray_trace::stats::take());
+            }
             let m: Measured = match kind {
                 Kind::Primary1 => measure_items(&pool, reps, min_s, tiles.len(), |i| {
                     let (x0, y0, x1, y1) = tiles[i];
@@ -366,6 +369,25 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
                 }),
                 Kind::Build => unreachable!("filtered out above"),
             };
+            if megaray_trace::stats::ENABLED {
+                // Traversal counters of every pass (warm-up included), per ray traced.
+                let mut c = megaray_trace::stats::Counters::default();
+                for t in pool.broadcast(|_| megaray_trace::stats::take()) {
+                    c.add(&t);
+                }
+                let per = |x: u64| x as f64 / c.rays.max(1) as f64;
+                on(Event::Info(format!(
+                    "{kind} {threads}T: {:.2} node visits, {:.2} triangle blocks, {:.2} tiles entered per ray{}",
+                    per(c.nodes),
+                    per(c.blocks),
+                    per(c.tiles_entered),
+                    if matches!(kind, Kind::Primary8 | Kind::Primary16) {
+                        " (a packet's node visit counts once)"
+                    } else {
+                        ""
+                    }
+                )));
+            }
             let rays = if secondary { nsec as u64 } else { npix };
             on(Event::Line(Record::Trace(TraceLine {
                 scene: name.to_string(),

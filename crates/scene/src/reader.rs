@@ -234,20 +234,27 @@ impl Scene {
     /// [`Scene::first_error`]) when it is corrupt; traversal then skips it.
     #[inline]
     pub fn tile(&self, t: u32) -> Option<Tile<'_>> {
-        let state = self.tile_state.get(t as usize)?;
+        self.tile_usable(t).then(|| self.tile_unchecked_view(t))
+    }
+
+    /// Whether tile `t` may be used: checked now if it never was (then `true` from then on),
+    /// `false` (and the fault recorded) when it is corrupt or does not exist.
+    #[inline]
+    pub fn tile_usable(&self, t: u32) -> bool {
+        let Some(state) = self.tile_state.get(t as usize) else { return false };
         match state.load(Ordering::Acquire) {
-            TILE_OK => Some(self.tile_unchecked_view(t)),
-            TILE_CORRUPT => None,
+            TILE_OK => true,
+            TILE_CORRUPT => false,
             _ => match self.check_tile(t) {
                 Ok(()) => {
                     state.store(TILE_OK, Ordering::Release);
-                    Some(self.tile_unchecked_view(t))
+                    true
                 }
                 Err(e) => {
                     state.store(TILE_CORRUPT, Ordering::Release);
                     let mut slot = self.first_error.lock().unwrap_or_else(|p| p.into_inner());
                     slot.get_or_insert(e);
-                    None
+                    false
                 }
             },
         }

@@ -20,6 +20,7 @@
 //! ```
 
 pub mod packet;
+pub mod stats;
 
 use glam::Vec4;
 use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
@@ -235,6 +236,7 @@ impl<'s> Tracer<'s> {
             c.tile = None;
         } else {
             let Some(t) = self.scene.tile(arr) else { return false };
+            stats::count(|s| s.tiles_entered += 1);
             let e = &self.tiles[arr as usize];
             c.nodes = t.nodes;
             c.tile = Some(t);
@@ -279,6 +281,7 @@ impl<'s> Tracer<'s> {
     }
 
     fn traverse(&self, ray: &Ray, any: bool) -> Option<Hit> {
+        stats::count(|s| s.rays += 1);
         let rb = RayBox::new(ray);
         // The triangle test's constants, made when the ray first reaches a leaf (most rays
         // of a wide view never do).
@@ -307,6 +310,7 @@ impl<'s> Tracer<'s> {
                 continue;
             }
             let node = &c.nodes[e.node as usize];
+            stats::count(|s| s.nodes += 1);
             let (dist, mut mask) = rb.test(node, ray.t_min, t_best);
             // Children hit, sorted far to near (pushed in that order, the nearest pops first).
             let mut hits = [(0f32, 0u64); 4];
@@ -323,6 +327,7 @@ impl<'s> Tracer<'s> {
                     while left > 0 {
                         let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
                         let b = &tile.blocks[blk as usize];
+                        stats::count(|s| s.blocks += 1);
                         if let Some((lane, h)) = rt.test(b, lanes, t_best) {
                             t_best = h.t;
                             let prim = c.first_slot + 4 * blk + lane as u32;

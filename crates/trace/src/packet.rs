@@ -124,6 +124,7 @@ fn fmax(a: f32, b: f32) -> f32 {
 #[inline(always)]
 fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
     let n = rays.len();
+    crate::stats::count(|s| s.rays += n as u64);
     let fix = |d: f32| if d.abs() < 1e-20 { 1e-20f32.copysign(d) } else { d };
     let mut p = Packet {
         ox: [0.0; WIDTH],
@@ -160,6 +161,7 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
             continue;
         }
         let node = &c.nodes[e.node as usize];
+        crate::stats::count(|s| s.nodes += 1);
         // Box k against all rays: a ray mask and the nearest entry distance per slot.
         let mut masks = [0u32; 4];
         let mut near_min = [f32::INFINITY; 4];
@@ -214,6 +216,7 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
                     while left > 0 {
                         let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
                         let b = &tile.blocks[blk as usize];
+                        crate::stats::count(|s| s.blocks += 1);
                         if let Some((lane, h)) = rt.test(b, lanes, p.t_max[r]) {
                             p.t_max[r] = h.t;
                             let prim = c.first_slot + 4 * blk + lane as u32;
