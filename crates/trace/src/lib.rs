@@ -79,7 +79,9 @@ struct RayBox {
 
 impl RayBox {
     fn new(r: &Ray) -> RayBox {
-        let fix = |d: f32| if d.abs() < 1e-20 { 1e-20f32.copysign(d) } else { d };
+        // Direction components of (nearly) zero become +-1e-20: finite reciprocals, so that no
+        // 0 * inf makes a NaN in the slab distances.
+        let fix = |d: f32| d.abs().max(1e-20).copysign(d);
         let inv = [1.0 / fix(r.dir.x), 1.0 / fix(r.dir.y), 1.0 / fix(r.dir.z)];
         RayBox {
             org: [Vec4::splat(r.org.x), Vec4::splat(r.org.y), Vec4::splat(r.org.z)],
@@ -91,22 +93,23 @@ impl RayBox {
     /// Entry distances of the four slots and a bit mask of the slots the ray enters
     /// within `[t0, t1]`.
     #[inline(always)]
-    fn test(&self, n: &Node4, t0: f32, t1: f32) -> (Vec4, u32) {
-        let axis = |lo: &[f32; 4], hi: &[f32; 4], k: usize| {
+    fn test(&self, n: &Node4, t0: f32, t1: f32) -> ([f32; 4], u32) {
+        // Near and far planes chosen by the direction's sign (the same for every node).
+        let slab = |lo: &[f32; 4], hi: &[f32; 4], k: usize| {
             let (near, far) = if self.neg[k] { (hi, lo) } else { (lo, hi) };
             (
                 (Vec4::from_array(*near) - self.org[k]) * self.inv[k],
                 (Vec4::from_array(*far) - self.org[k]) * self.inv[k],
             )
         };
-        let (nx, fx) = axis(&n.lo_x, &n.hi_x, 0);
-        let (ny, fy) = axis(&n.lo_y, &n.hi_y, 1);
-        let (nz, fz) = axis(&n.lo_z, &n.hi_z, 2);
+        let (nx, fx) = slab(&n.lo_x, &n.hi_x, 0);
+        let (ny, fy) = slab(&n.lo_y, &n.hi_y, 1);
+        let (nz, fz) = slab(&n.lo_z, &n.hi_z, 2);
         let near = nx.max(ny).max(nz).max(Vec4::splat(t0));
         // Both the box's exit and the current closest hit are widened: a box's entry distance
         // may round up past the distance of a hit inside it.
         let far = fx.min(fy).min(fz).min(Vec4::splat(t1)) * BOX_EPS;
-        (near, near.cmple(far).bitmask())
+        (near.to_array(), near.cmple(far).bitmask())
     }
 }
 
