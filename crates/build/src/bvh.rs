@@ -152,11 +152,11 @@ impl Ctx {
         // Binned SAH over all three axes in one pass; fewer bins for small nodes, where the
         // per-node cost of clearing and sweeping bins would dominate.
         let (best, nb) = if n >= 1024 {
-            (find_split::<32, 2>(refs, &ext), 32)
+            (find_split::<32, 2>(refs, &ext, n > self.cfg.parallel_above), 32)
         } else if n >= 32 {
-            (find_split::<16, 1>(refs, &ext), 16)
+            (find_split::<16, 1>(refs, &ext, false), 16)
         } else {
-            (find_split::<8, 1>(refs, &ext), 8)
+            (find_split::<8, 1>(refs, &ext, false), 8)
         };
         let cmin = ext.clo;
         let scale = bin_scale(&ext, nb);
@@ -203,48 +203,77 @@ fn bin_scale(ext: &Extent, nb: usize) -> Vec4 {
     Vec4::select(cext.cmpgt(Vec4::ZERO), Vec4::splat(nb as f32) / cext, Vec4::ZERO)
 }
 
-/// The best binned-SAH split of `refs` with `NB` bins per axis, binning with `SETS`
-/// interleaved bin sets (2 for large nodes, so that neighbours falling into the same bin do
-/// not wait on each other's stores). Returns (cost, axis, first bin of the right side);
-/// the cost is infinite when no split separates anything.
-fn find_split<const NB: usize, const SETS: usize>(refs: &[PrimRef], ext: &Extent) -> (f32, usize, usize) {
-    let cmin = ext.clo;
-    let scale = bin_scale(ext, NB);
-    let mut cnt = [[[0u32; NB]; 3]; SETS];
-    let mut blo = [[[Vec4::INFINITY; NB]; 3]; SETS];
-    let mut bhi = [[[Vec4::NEG_INFINITY; NB]; 3]; SETS];
-    let bin_of = |r: &PrimRef| bins_of(r, cmin, scale, NB);
-    let mut groups = refs.chunks_exact(SETS);
-    for g in &mut groups {
-        for (j, r) in g.iter().enumerate() {
-            let bi = bin_of(r);
-            for k in 0..3 {
-                let i = bi[k];
-                cnt[j][k][i] += 1;
-                blo[j][k][i] = blo[j][k][i].min(r.lo);
-                bhi[j][k][i] = bhi[j][k][i].max(r.hi);
-            }
-        }
+/// Per-axis bins: primitive counts and bounds.
+struct Bins<const NB: usize> {
+    cnt: [[u32; NB]; 3],
+    lo: [[Vec4; NB]; 3],
+    hi: [[Vec4; NB]; 3],
+}
+
+impl<const NB: usize> Bins<NB> {
+    fn empty() -> Self {
+        Bins { cnt: [[0; NB]; 3], lo: [[Vec4::INFINITY; NB]; 3], hi: [[Vec4::NEG_INFINITY; NB]; 3] }
     }
-    for r in groups.remainder() {
-        let bi = bin_of(r);
-        for k in 0..3 {
-            let i = bi[k];
-            cnt[0][k][i] += 1;
-            blo[0][k][i] = blo[0][k][i].min(r.lo);
-            bhi[0][k][i] = bhi[0][k][i].max(r.hi);
-        }
-    }
-    for j in 1..SETS {
+
+    fn merge(mut self, o: &Self) -> Self {
         for k in 0..3 {
             for i in 0..NB {
-                cnt[0][k][i] += cnt[j][k][i];
-                blo[0][k][i] = blo[0][k][i].min(blo[j][k][i]);
-                bhi[0][k][i] = bhi[0][k][i].max(bhi[j][k][i]);
+                self.cnt[k][i] += o.cnt[k][i];
+                self.lo[k][i] = self.lo[k][i].min(o.lo[k][i]);
+                self.hi[k][i] = self.hi[k][i].max(o.hi[k][i]);
             }
         }
+        self
     }
-    let (cnt, blo, bhi) = (&cnt[0], &blo[0], &bhi[0]);
+
+    /// Bins `refs`, alternating between `SETS` bin sets (2 for large nodes, so that neighbours
+    /// falling into the same bin do not wait on each other's stores).
+    fn gather<const SETS: usize>(refs: &[PrimRef], cmin: Vec4, scale: Vec4) -> Self {
+        let mut sets: [Bins<NB>; SETS] = std::array::from_fn(|_| Bins::empty());
+        let mut add = |j: usize, r: &PrimRef| {
+            let bi = bins_of(r, cmin, scale, NB);
+            let b = &mut sets[j];
+            for k in 0..3 {
+                let i = bi[k];
+                b.cnt[k][i] += 1;
+                b.lo[k][i] = b.lo[k][i].min(r.lo);
+                b.hi[k][i] = b.hi[k][i].max(r.hi);
+            }
+        };
+        let mut groups = refs.chunks_exact(SETS);
+        for g in &mut groups {
+            for (j, r) in g.iter().enumerate() {
+                add(j, r);
+            }
+        }
+        for r in groups.remainder() {
+            add(0, r);
+        }
+        let mut it = sets.into_iter();
+        let first = it.next().expect("at least one bin set");
+        it.fold(first, |acc, b| acc.merge(&b))
+    }
+}
+
+/// The best binned-SAH split of `refs` with `NB` bins per axis (binned by `SETS` interleaved
+/// sets, and across threads when `parallel`). Returns (cost, axis, first bin of the right
+/// side); the cost is infinite when no split separates anything.
+fn find_split<const NB: usize, const SETS: usize>(
+    refs: &[PrimRef],
+    ext: &Extent,
+    parallel: bool,
+) -> (f32, usize, usize) {
+    let cmin = ext.clo;
+    let scale = bin_scale(ext, NB);
+    let bins = if parallel && refs.len() >= 1 << 17 {
+        use rayon::prelude::*;
+        refs.par_chunks(1 << 15)
+            .map(|c| Bins::<NB>::gather::<SETS>(c, cmin, scale))
+            .reduce(Bins::empty, |a, b| a.merge(&b))
+    } else {
+        Bins::<NB>::gather::<SETS>(refs, cmin, scale)
+    };
+    let (cnt, blo, bhi) = (&bins.cnt, &bins.lo, &bins.hi);
     let mut best = (f32::INFINITY, 0usize, 0usize);
     for axis in 0..3 {
         if scale[axis] == 0.0 {
@@ -278,21 +307,27 @@ fn find_split<const NB: usize, const SETS: usize>(refs: &[PrimRef], ext: &Extent
 }
 
 /// In-place partition; returns the number of elements for which `pred` holds (they come
-/// first) and the extents of both sides.
+/// first) and the extents of both sides. Hoare-style: scan from both ends and swap pairs of
+/// misplaced elements; extents are gathered in a second, branch-free pass over each side.
 fn partition(v: &mut [PrimRef], pred: impl Fn(&PrimRef) -> bool) -> (usize, Extent, Extent) {
-    let (mut le, mut re) = (Extent::EMPTY, Extent::EMPTY);
-    let mut i = 0;
-    let mut j = v.len();
-    while i < j {
-        if pred(&v[i]) {
-            le.add(&v[i]);
+    let (mut i, mut j) = (0, v.len());
+    loop {
+        while i < j && pred(&v[i]) {
             i += 1;
-        } else {
-            j -= 1;
-            re.add(&v[i]);
-            v.swap(i, j);
         }
+        while i < j && !pred(&v[j - 1]) {
+            j -= 1;
+        }
+        if i >= j {
+            break;
+        }
+        v.swap(i, j - 1);
+        i += 1;
+        j -= 1;
     }
+    let (mut le, mut re) = (Extent::EMPTY, Extent::EMPTY);
+    v[..i].iter().for_each(|r| le.add(r));
+    v[i..].iter().for_each(|r| re.add(r));
     (i, le, re)
 }
 

@@ -342,7 +342,12 @@ fn build_part(
 /// order (4 per block), the index in `tris` of its triangle or [`tiles::PADDING`]. This is
 /// the in-core builder that `megaray bench` times.
 pub fn build_in_core(tris: &[[[f32; 3]; 3]], tile_target: u32, parallel: bool) -> (PartBlob, Vec<u32>) {
-    let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(t)).collect();
+    let boxes: Vec<Aabb> = if parallel {
+        use rayon::prelude::*;
+        tris.par_iter().with_min_len(1 << 14).map(|t| Aabb::from_points(t)).collect()
+    } else {
+        tris.iter().map(|t| Aabb::from_points(t)).collect()
+    };
     let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX } };
     let bvh = build_bvh4(&boxes, cfg);
     drop(boxes);
