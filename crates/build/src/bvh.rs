@@ -233,8 +233,7 @@ impl<const NB: usize> Bins<NB> {
         let mut add = |j: usize, r: &PrimRef| {
             let bi = bins_of(r, cmin, scale, NB);
             let b = &mut sets[j];
-            for k in 0..3 {
-                let i = bi[k];
+            for (k, &i) in bi.iter().enumerate() {
                 b.cnt[k][i] += 1;
                 b.lo[k][i] = b.lo[k][i].min(r.lo);
                 b.hi[k][i] = b.hi[k][i].max(r.hi);
