@@ -190,6 +190,7 @@ pub fn build_scene(
             mem_limit: opts.import_mem.unwrap_or(opts.build_mem / 4),
             temp_dir: tmp.path().to_path_buf(),
         };
+        sink.set_input(input);
         let s = match megaray_import::import_file(input, &iopts, &mut sink, progress) {
             Ok(s) => s,
             // A failure of our own (disk full, cancelled) outranks the reader's view of it.
@@ -242,9 +243,9 @@ pub fn build_scene(
     })?;
     progress.finish();
     let writer = writer.into_inner().unwrap_or_else(|e| e.into_inner());
+    let tiles = writer.tile_count();
     let file_bytes = writer.finish(bounds, dropped, &materials)?;
     let parts_s = t2.elapsed().as_secs_f64();
-    let tiles = count_tiles(out).unwrap_or(0);
     drop(tmp);
     Ok(BuildSummary {
         inputs: inputs.len(),
@@ -264,10 +265,6 @@ pub fn build_scene(
         parts_s,
         total_s: t0.elapsed().as_secs_f64(),
     })
-}
-
-fn count_tiles(out: &Path) -> Option<u32> {
-    megaray_scene::Scene::open(out).ok().map(|s| s.header().tile_count)
 }
 
 /// The top-level tree over part boxes, in file layout; returns nodes and depth.

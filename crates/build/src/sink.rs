@@ -18,6 +18,8 @@ pub struct BuildSink<'a> {
     error: Option<BuildError>,
     opts: &'a BuildOptions,
     seen: u64,
+    /// The input being imported (for error messages).
+    input: std::path::PathBuf,
 }
 
 impl<'a> BuildSink<'a> {
@@ -30,7 +32,13 @@ impl<'a> BuildSink<'a> {
             error: None,
             opts,
             seen: 0,
+            input: std::path::PathBuf::from("(input)"),
         })
+    }
+
+    /// Names the input whose triangles come next.
+    pub fn set_input(&mut self, path: &Path) {
+        self.input = path.to_path_buf();
     }
 
     /// The sink's own failure (disk full, cancelled), if it had one.
@@ -53,11 +61,11 @@ impl TriangleSink for BuildSink<'_> {
         self.seen += 1;
         if self.seen.is_multiple_of(65536) && self.opts.cancel.load(std::sync::atomic::Ordering::Relaxed) {
             self.error = Some(BuildError::Cancelled);
-            return Err(ImportError::new(Path::new("(build)"), None, "interrupted"));
+            return Err(ImportError::new(&self.input, None, "interrupted"));
         }
         if !megaray_base::tri_is_finite(&p) {
             return Err(ImportError::new(
-                Path::new("(input)"),
+                &self.input,
                 Some(format!("triangle {}", self.seen - 1)),
                 "non-finite coordinate",
             ));
@@ -71,7 +79,7 @@ impl TriangleSink for BuildSink<'_> {
         if let Err(e) = r {
             let msg = e.to_string();
             self.error = Some(e);
-            return Err(ImportError::new(Path::new("(build)"), None, msg));
+            return Err(ImportError::new(&self.input, None, msg));
         }
         Ok(())
     }

@@ -224,7 +224,13 @@ impl SceneWriter {
         Ok(off)
     }
 
-    /// Writes the tables and the header, syncs, and renames the file into place.
+    /// Tiles appended so far.
+    pub fn tile_count(&self) -> u32 {
+        self.tiles.len() as u32
+    }
+
+    /// Writes the tables and the header, syncs, and renames the file into place. Returns the
+    /// file's size in bytes.
     pub fn finish(
         mut self,
         bounds: Aabb,
