@@ -52,6 +52,38 @@ impl Hit {
     }
 }
 
+/// A ray could not be finished because scene data it needs is not resident yet (out-of-core
+/// rendering with a memory budget: the tile was requested and will arrive later). Whoever
+/// asked gives up on the work that needed the ray and retries it later. A [`Tracer`] over a
+/// fully mapped scene never reports it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Suspended;
+
+/// Rays on demand, as shaders see them: the closest hit and any hit of arbitrary rays, either
+/// answered now or [`Suspended`]. Shaders propagate a suspension with `?`; they must be
+/// deterministic (the same inputs fire the same rays) because suspended work is re-run.
+pub trait RayCaster {
+    /// The scene the rays are traced in (for its attributes and materials).
+    fn scene(&self) -> &Scene;
+    /// The closest hit of `ray` in `[ray.t_min, ray.t_max)`.
+    fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended>;
+    /// Whether anything lies on `ray` in `[ray.t_min, ray.t_max)`.
+    fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended>;
+}
+
+/// A plain tracer answers every ray at once.
+impl RayCaster for &Tracer<'_> {
+    fn scene(&self) -> &Scene {
+        self.scene
+    }
+    fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended> {
+        Ok(Tracer::intersect(self, ray))
+    }
+    fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended> {
+        Ok(Tracer::occluded(self, ray))
+    }
+}
+
 /// Which node array a stack entry refers to.
 const TOP: u32 = u32::MAX;
 /// Capacity of the traversal stack kept on the machine stack.
