@@ -260,6 +260,82 @@ impl Scene {
         }
     }
 
+    /// The view of tile `t` without checking it. The caller has checked it with
+    /// [`Scene::check_tile`] (as the pager does on every load): a corrupt tile's references
+    /// are not trusted by anyone else. Panics if `t` is not a tile.
+    pub fn tile_view(&self, t: u32) -> Tile<'_> {
+        self.tile_unchecked_view(t)
+    }
+
+    /// The byte ranges of the file that belong to tile `t`: its nodes and blocks, then the
+    /// attributes of its triangle slots in each attribute array of its part. These are what
+    /// a pager loads and releases together. `None` if `t` is not a tile.
+    pub fn tile_ranges(&self, t: u32) -> Option<Vec<(u64, u64)>> {
+        let e = self.tiles().get(t as usize)?;
+        let p = &self.parts()[e.part as usize];
+        let mut out = vec![(e.offset, e.bytes as u64)];
+        let slots = 4 * e.blocks as u64;
+        for (off, size) in [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)] {
+            if off != 0 && slots > 0 {
+                out.push((off + e.first_slot as u64 * size, slots * size));
+            }
+        }
+        Some(out)
+    }
+
+    /// The byte ranges that stay resident while the scene is open: the header page and the
+    /// tables (top-level tree, part and tile directories, materials).
+    pub fn pinned_ranges(&self) -> Vec<(u64, u64)> {
+        let h = &self.header;
+        vec![
+            (0, PAGE),
+            (h.top_nodes_off, h.top_node_count as u64 * 128),
+            (h.parts_off, h.part_count as u64 * 128),
+            (h.tiles_off, h.tile_count as u64 * 40),
+            (h.materials_off, h.materials_bytes),
+        ]
+    }
+
+    /// Memory advice for the whole mapping: random access (no read-ahead around faults;
+    /// a pager reads exactly the tiles it wants).
+    pub fn advise_random(&self) -> std::io::Result<()> {
+        self.map.advise(memmap2::Advice::Random)
+    }
+
+    /// Starts reading `len` bytes at `off` into the page cache (madvise WILLNEED).
+    /// The range is clamped to the file.
+    pub fn will_need(&self, off: u64, len: u64) -> std::io::Result<()> {
+        let (off, len) = self.clamp_pages(off, len);
+        if len == 0 {
+            return Ok(());
+        }
+        self.map.advise_range(memmap2::Advice::WillNeed, off, len)
+    }
+
+    /// Drops the pages of `len` bytes at `off` (widened to whole pages) from this process
+    /// (madvise DONTNEED): resident memory falls, and the next access reads the file again.
+    /// The mapping is read-only, so nothing is lost. The caller guarantees that no thread
+    /// is reading those bytes (the pager waits for a grace period first): they would not
+    /// see garbage, but would fault the pages back in behind the pager's back.
+    pub fn release(&self, off: u64, len: u64) -> std::io::Result<()> {
+        let (off, len) = self.clamp_pages(off, len);
+        if len == 0 {
+            return Ok(());
+        }
+        // SAFETY: DONTNEED on a read-only file mapping only discards this process's page
+        // table entries: later reads fault the same file bytes back in. No `&mut` to the map
+        // exists, and views handed out stay valid (same address, same contents).
+        unsafe { self.map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, off, len) }
+    }
+
+    /// `(off, len)` widened to whole pages and clamped to the mapping.
+    fn clamp_pages(&self, off: u64, len: u64) -> (usize, usize) {
+        let file = self.map.len() as u64;
+        let start = (off / PAGE * PAGE).min(file);
+        let end = off.saturating_add(len).div_ceil(PAGE).saturating_mul(PAGE).min(file);
+        (start as usize, end.saturating_sub(start) as usize)
+    }
+
     fn tile_unchecked_view(&self, t: u32) -> Tile<'_> {
         let e = &self.tiles()[t as usize];
         let nodes_end = e.offset as usize + e.node_count as usize * 128;

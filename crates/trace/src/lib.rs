@@ -19,11 +19,13 @@
 //! }
 //! ```
 
+pub mod jobs;
 pub mod packet;
 pub mod stats;
 
 use glam::Vec4;
 use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
+use megaray_page::{Access, Pager};
 use megaray_scene::format::{Child, ChildRef, Node4, Tri4};
 use megaray_scene::{PartEntry, Scene, Tile, TileEntry};
 
@@ -93,7 +95,7 @@ const STACK: usize = 32;
 /// watertight triangle test would find (Ize 2013: 1 + 2 gamma(3)).
 const BOX_EPS: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Debug)]
 struct Entry {
     arr: u32,
     node: u32,
@@ -234,12 +236,56 @@ impl RayTri4 {
 }
 
 /// Traces rays through one scene. Cheap to create; share one across threads.
+///
+/// Two modes: [`Tracer::new`] reads the whole mapped file (the operating system pages on
+/// demand, stalling the thread on a miss); [`Tracer::paged`] reads only tiles that a
+/// [`Pager`] has made resident, and a ray that needs an absent tile comes back
+/// [`Traced::Pending`] (its traversal state saved) from [`Tracer::try_intersect`] and
+/// [`Tracer::try_occluded`], to be resumed with [`Tracer::resume`] once the tile arrived.
+/// A paged tracer must be used under a [`megaray_page::Pin`] (see [`jobs`], which pins and
+/// reschedules for you); its blocking [`Tracer::intersect`] and [`Tracer::occluded`] pin
+/// themselves and wait for missing tiles.
 pub struct Tracer<'s> {
     scene: &'s Scene,
+    pager: Option<&'s Pager>,
     // The scene's tables, looked up once rather than at every tile crossing.
     top: &'s [Node4],
     parts: &'s [PartEntry],
     tiles: &'s [TileEntry],
+}
+
+/// A ray whose traversal stopped at a tile that is not resident: its stack and best hit so
+/// far. Resume it with [`Tracer::resume`] once [`Pending::tile`] has arrived.
+#[derive(Clone, Debug)]
+pub struct Pending {
+    stack: Vec<Entry>,
+    best: Option<Hit>,
+    any: bool,
+    tile: u32,
+}
+
+impl Pending {
+    /// The tile the ray waits for.
+    pub fn tile(&self) -> u32 {
+        self.tile
+    }
+}
+
+/// The outcome of a traversal that may meet absent tiles.
+#[derive(Clone, Debug)]
+pub enum Traced {
+    /// Finished: the closest hit (or, for an any-hit query, some hit), if any.
+    Done(Option<Hit>),
+    /// Stopped at an absent tile (now requested).
+    Pending(Pending),
+}
+
+/// What opening a tile gave.
+#[derive(PartialEq)]
+enum Open {
+    Ready,
+    Skip,
+    Missing,
 }
 
 /// Traversal state kept between node visits: the tile currently open.
@@ -253,24 +299,46 @@ struct Cursor<'s> {
 
 impl<'s> Tracer<'s> {
     pub fn new(scene: &'s Scene) -> Tracer<'s> {
-        Tracer { scene, top: scene.top_nodes(), parts: scene.parts(), tiles: scene.tiles() }
+        Tracer { scene, pager: None, top: scene.top_nodes(), parts: scene.parts(), tiles: scene.tiles() }
+    }
+
+    /// A tracer that reads only the tiles `pager` has made resident.
+    pub fn paged(pager: &'s Pager) -> Tracer<'s> {
+        let scene: &'s Scene = pager.scene();
+        Tracer { pager: Some(pager), ..Tracer::new(scene) }
+    }
+
+    /// The pager, for a paged tracer.
+    pub fn pager(&self) -> Option<&'s Pager> {
+        self.pager
     }
 
     pub fn scene(&self) -> &'s Scene {
         self.scene
     }
 
-    /// Points `c` at node array `arr`; `false` when that tile is corrupt (skip the entry).
+    /// Points `c` at node array `arr`: [`Open::Skip`] when that tile is corrupt (skip the
+    /// entry), [`Open::Missing`] when a paged tile is not resident (it has been requested).
     #[inline]
-    fn open(&self, c: &mut Cursor<'s>, arr: u32) -> bool {
+    fn open(&self, c: &mut Cursor<'s>, arr: u32) -> Open {
         if c.arr == arr {
-            return true;
+            return Open::Ready;
         }
         if arr == TOP {
             c.nodes = self.top;
             c.tile = None;
         } else {
-            let Some(t) = self.scene.tile(arr) else { return false };
+            let t = match self.pager {
+                None => match self.scene.tile(arr) {
+                    Some(t) => t,
+                    None => return Open::Skip,
+                },
+                Some(p) => match p.acquire(arr) {
+                    Access::Ready => self.scene.tile_view(arr),
+                    Access::Corrupt => return Open::Skip,
+                    Access::Missing => return Open::Missing,
+                },
+            };
             stats::count(|s| s.tiles_entered += 1);
             let e = &self.tiles[arr as usize];
             c.nodes = t.nodes;
@@ -279,7 +347,7 @@ impl<'s> Tracer<'s> {
             c.first_slot = e.first_slot;
         }
         c.arr = arr;
-        true
+        Open::Ready
     }
 
     fn part_root(&self, p: u32) -> Entry {
@@ -287,9 +355,62 @@ impl<'s> Tracer<'s> {
         Entry { arr: e.root_tile, node: e.root_node, t: 0.0 }
     }
 
-    /// The closest hit of `ray` in `[ray.t_min, ray.t_max)`.
+    /// The closest hit of `ray` in `[ray.t_min, ray.t_max)`. On a paged tracer this waits
+    /// for missing tiles (use [`Tracer::try_intersect`] not to).
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.traverse(ray, false)
+        self.blocking(ray, false)
+    }
+
+    /// Whether anything lies on `ray` in `[ray.t_min, ray.t_max)`. On a paged tracer this
+    /// waits for missing tiles (use [`Tracer::try_occluded`] not to).
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.blocking(ray, true).is_some()
+    }
+
+    /// The closest hit of `ray`, or [`Traced::Pending`] when it needs an absent tile.
+    /// Paged tracers: call under a pin ([`Pager::pin`]).
+    pub fn try_intersect(&self, ray: &Ray) -> Traced {
+        self.traverse(ray, false, None)
+    }
+
+    /// Any hit of `ray` (`Done(Some(_))` means occluded), or [`Traced::Pending`].
+    /// Paged tracers: call under a pin ([`Pager::pin`]).
+    pub fn try_occluded(&self, ray: &Ray) -> Traced {
+        self.traverse(ray, true, None)
+    }
+
+    /// Continues a pending traversal of the same `ray` (same query kind) where it stopped.
+    pub fn resume(&self, ray: &Ray, pending: Pending) -> Traced {
+        let any = pending.any;
+        self.traverse(ray, any, Some(pending))
+    }
+
+    /// Traces to the end, waiting for missing tiles (pinned only while traversing).
+    fn blocking(&self, ray: &Ray, any: bool) -> Option<Hit> {
+        let Some(pager) = self.pager else {
+            return match self.traverse(ray, any, None) {
+                Traced::Done(h) => h,
+                Traced::Pending(_) => unreachable!("an unpaged tracer never suspends"),
+            };
+        };
+        let mut from = None;
+        loop {
+            let seen = pager.arrivals();
+            let r = {
+                let _pin = pager.pin();
+                self.traverse(ray, any, from.take())
+            };
+            match r {
+                Traced::Done(h) => return h,
+                Traced::Pending(p) => {
+                    let mut seen = seen;
+                    while !pager.settled(p.tile) {
+                        seen = pager.wait_arrival(seen, std::time::Duration::from_millis(20));
+                    }
+                    from = Some(p);
+                }
+            }
+        }
     }
 
     /// The closest hits of a packet of rays (coherent ones, such as 4x4 pixels), into `hits`
@@ -304,18 +425,20 @@ impl<'s> Tracer<'s> {
     /// [`packet::Isa::available`]); for tests and benchmarks.
     pub fn intersect_packet_with(&self, rays: &[Ray], hits: &mut [Option<Hit>], isa: packet::Isa) {
         assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
+        if self.pager.is_some() {
+            // Packets do not suspend: a paged tracer traces them ray by ray.
+            for (r, h) in rays.iter().zip(hits.iter_mut()) {
+                *h = self.intersect(r);
+            }
+            return;
+        }
         assert!(packet::Isa::available().contains(&isa), "{isa:?} is not available on this machine");
         for (r, h) in rays.chunks(packet::WIDTH).zip(hits.chunks_mut(packet::WIDTH)) {
             packet::intersect16(self, r, h, isa);
         }
     }
 
-    /// Whether anything lies on `ray` in `[ray.t_min, ray.t_max)`.
-    pub fn occluded(&self, ray: &Ray) -> bool {
-        self.traverse(ray, true).is_some()
-    }
-
-    fn traverse(&self, ray: &Ray, any: bool) -> Option<Hit> {
+    fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
         stats::count(|s| s.rays += 1);
         let rb = RayBox::new(ray);
         // The triangle test's constants, made when the ray first reaches a leaf (most rays
@@ -328,6 +451,15 @@ impl<'s> Tracer<'s> {
         // Entries beyond the fixed stack (only for pathologically deep trees; order does not
         // matter for correctness, only for speed).
         let mut spill: Vec<Entry> = Vec::new();
+        if let Some(p) = from {
+            best = p.best;
+            t_best = best.map_or(ray.t_max, |h| h.t);
+            let k = p.stack.len().min(STACK);
+            let split = p.stack.len() - k;
+            stack[..k].copy_from_slice(&p.stack[split..]);
+            sp = k;
+            spill.extend_from_slice(&p.stack[..split]);
+        }
         let mut c = Cursor { arr: TOP, nodes: self.top, tile: None, part: 0, first_slot: 0 };
         loop {
             let e = if sp > 0 {
@@ -341,8 +473,15 @@ impl<'s> Tracer<'s> {
             if e.t > t_best * BOX_EPS {
                 continue;
             }
-            if !self.open(&mut c, e.arr) {
-                continue;
+            match self.open(&mut c, e.arr) {
+                Open::Ready => {}
+                Open::Skip => continue,
+                Open::Missing => {
+                    let mut stack_out = spill;
+                    stack_out.extend_from_slice(&stack[..sp]);
+                    stack_out.push(e);
+                    return Traced::Pending(Pending { stack: stack_out, best, any, tile: e.arr });
+                }
             }
             let node = &c.nodes[e.node as usize];
             stats::count(|s| s.nodes += 1);
@@ -368,7 +507,7 @@ impl<'s> Tracer<'s> {
                             let prim = c.first_slot + 4 * blk + lane as u32;
                             best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: b.tri(lane) });
                             if any {
-                                return best;
+                                return Traced::Done(best);
                             }
                         }
                         left = left.saturating_sub(4);
@@ -403,7 +542,7 @@ impl<'s> Tracer<'s> {
                 }
             }
         }
-        best
+        Traced::Done(best)
     }
 }
 

@@ -12,7 +12,7 @@ use std::sync::OnceLock;
 use megaray_base::Ray;
 use megaray_scene::format::{Child, ChildRef};
 
-use crate::{Cursor, Entry, Hit, RayTri4, Tracer, BOX_EPS, TOP};
+use crate::{Cursor, Entry, Hit, Open, RayTri4, Tracer, BOX_EPS, TOP};
 
 /// Rays in a packet.
 pub const WIDTH: usize = 16;
@@ -157,7 +157,7 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
         for r in 0..WIDTH {
             any |= e.t <= p.t_max[r] * BOX_EPS;
         }
-        if !any || !tracer.open(&mut c, e.arr) {
+        if !any || tracer.open(&mut c, e.arr) != Open::Ready {
             continue;
         }
         let node = &c.nodes[e.node as usize];

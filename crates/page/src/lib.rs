@@ -1,0 +1,648 @@
+//! # megaray-page: a scene file within a memory budget
+//!
+//! A [`Pager`] keeps the resident part of a memory-mapped [`Scene`] under a budget, the way
+//! the seed's out-of-core ray tracer did for the Boeing 777 (Wald et al. 2004, "Interactive
+//! out-of-core rendering"), with today's tools:
+//!
+//! - **Tile table.** One 32-bit state word per tile ([`Pager::acquire`]): *available*,
+//!   *referenced* (second chance), *requested*, *evicting*, *corrupt*. Tile numbers are dense
+//!   (0..tile_count) and links name them directly, so the table is indexed by tile number:
+//!   the seed's hash table with a base address to detect collisions is not needed (there
+//!   are no collisions). Tracing threads read it lock-free; a tile's bytes are touched only
+//!   after its *available* bit was seen under a [`Pin`].
+//! - **Asynchronous fetchers** (threads): take requests, deduplicated (one queue entry per
+//!   tile, the *requested* bit), most-wanted first (a count of the rays that asked), read
+//!   the tile's pages (madvise WILLNEED, then the checksum pass touches every byte through
+//!   the map), verify its checksum and references ([`Scene::check_tile`]) and publish it.
+//! - **Second-chance eviction** (clock) whenever resident tile bytes would pass the budget:
+//!   a hand sweeps the tile numbers; a referenced tile loses its bit and survives one
+//!   sweep, an unreferenced one is evicted. Victims stop being *available*, then a grace
+//!   period (epochs, below) waits until no thread can still be reading them, then their
+//!   pages are released: madvise(DONTNEED) out of this process, posix_fadvise(DONTNEED) out
+//!   of the page cache. Eviction runs down to a low watermark (15/16 of the budget) so that
+//!   grace periods are few.
+//! - **Pins and grace periods.** A tracing thread holds a [`Pin`] while it traverses (a ray,
+//!   or a sample's few rays); pins count into per-thread stripes of two epoch parities.
+//!   The evictor flips the epoch and waits for the old parity's counts to drain (classic
+//!   two-phase quiescence, as in userspace RCU). Readers never wait for the evictor.
+//! - The header page and the tables (top-level tree, part and tile directories, materials)
+//!   stay resident: they are "pinned" and counted against the budget up front.
+//!
+//! What a resident tile costs: its node and block bytes plus the attributes of its triangle
+//! slots ([`Scene::tile_ranges`]), each range widened to whole pages.
+//!
+//! ```no_run
+//! use std::sync::Arc;
+//! use megaray_scene::Scene;
+//! use megaray_page::{Pager, PagerOptions};
+//! let scene = Arc::new(Scene::open("big.mray".as_ref()).unwrap());
+//! let pager = Pager::new(scene.clone(), PagerOptions { budget: 2 << 30, fetchers: 2 }).unwrap();
+//! // Hand `&pager` to megaray_trace::Tracer::paged; print pager.stats() after a frame.
+//! ```
+
+use std::fs::File;
+use std::os::fd::AsRawFd;
+use std::sync::atomic::{fence, AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering::*};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use crossbeam::utils::CachePadded;
+use megaray_base::format_size;
+use megaray_scene::{Scene, SceneError};
+
+/// The tile's bytes are resident and checked: traversal may read them (under a [`Pin`]).
+const AVAIL: u32 = 1;
+/// Used since the clock hand last passed (second chance).
+const REFD: u32 = 2;
+/// In the fetchers' queue (or being loaded): further requests only raise its priority.
+const REQ: u32 = 4;
+/// Chosen as a victim, its pages not yet released: a request for it waits.
+const EVICTING: u32 = 8;
+/// Failed its check: never loaded again; traversal skips it.
+const CORRUPT: u32 = 16;
+/// Loaded and not yet used: protected from eviction for [`FRESH_MS`], so that the rays
+/// waiting for it get to use it before a busy fetcher pushes it out again.
+const FRESH: u32 = 32;
+
+/// How long a loaded tile nobody has used yet is protected from eviction.
+const FRESH_MS: u64 = 50;
+
+/// Number of per-thread counter stripes (pins, lookups).
+const STRIPES: usize = 64;
+/// The page size the pager rounds to.
+const PAGE: u64 = 4096;
+
+/// What traversal may do with a tile, from [`Pager::acquire`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Access {
+    /// Resident and checked: read it (the caller holds a [`Pin`]).
+    Ready,
+    /// Not resident: it has been requested; suspend the ray until it arrives.
+    Missing,
+    /// Failed its check: skip it (the fault is in [`Pager::first_error`]).
+    Corrupt,
+}
+
+/// How to page.
+#[derive(Clone, Copy, Debug)]
+pub struct PagerOptions {
+    /// Budget for resident scene bytes: the pinned tables plus resident tiles.
+    pub budget: u64,
+    /// Number of fetcher threads (loads in flight at once). 2 is a good default on a
+    /// local disk; more helps on network storage.
+    pub fetchers: usize,
+}
+
+/// Why a pager could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum PagerError {
+    #[error("{path}: a memory budget of {budget} is too small for this scene: at least {need} (its tables take {pinned} and its largest tile {tile})")]
+    BudgetTooSmall { path: String, budget: String, need: String, pinned: String, tile: String },
+    #[error("{path}: cannot open for paging: {msg}")]
+    Io { path: String, msg: String },
+}
+
+/// Counters since the pager started. See [`Pager::stats`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PagerStats {
+    /// Distinct tile requests queued (a tile asked for by many rays counts once).
+    pub requested: u64,
+    /// Tiles loaded and published.
+    pub loaded: u64,
+    /// Tiles evicted.
+    pub evicted: u64,
+    /// Bytes loaded (page-rounded tile ranges).
+    pub bytes_loaded: u64,
+    /// Tile-table lookups by traversal, and how many found the tile absent.
+    pub lookups: u64,
+    pub misses: u64,
+    /// Tiles found corrupt.
+    pub corrupt: u64,
+    /// Resident tile bytes now, and the most there ever were.
+    pub resident: u64,
+    pub peak_resident: u64,
+    /// Bytes always resident (header page and tables).
+    pub pinned: u64,
+    /// The budget for tiles: the budget less the pinned bytes.
+    pub tile_budget: u64,
+    /// Seconds fetchers spent loading and checking tiles, and waiting for grace periods.
+    pub load_secs: f64,
+    pub grace_secs: f64,
+}
+
+impl PagerStats {
+    /// The fraction of tile-table lookups that found the tile resident.
+    pub fn hit_rate(&self) -> f64 {
+        if self.lookups == 0 {
+            1.0
+        } else {
+            1.0 - self.misses as f64 / self.lookups as f64
+        }
+    }
+}
+
+/// Pages a scene within a budget. Create one per open scene; dropping it stops the fetchers.
+pub struct Pager {
+    shared: Arc<Shared>,
+    fetchers: Vec<JoinHandle<()>>,
+}
+
+struct Shared {
+    scene: Arc<Scene>,
+    /// For posix_fadvise on eviction.
+    file: File,
+    state: Vec<AtomicU32>,
+    /// How many rays asked for each requested tile (the queue's priority).
+    want: Vec<AtomicU32>,
+    /// Resident bytes of each tile (its page-rounded ranges).
+    cost: Vec<u64>,
+    /// How many times each tile's pages were released (a generation, for tests).
+    releases: Vec<AtomicU32>,
+    /// When each tile was last loaded, in milliseconds since `start`.
+    loaded_at: Vec<AtomicU64>,
+    start: Instant,
+    queue: Mutex<Vec<u32>>,
+    queue_cv: Condvar,
+    /// Publication count, bumped (and waiters woken) whenever a tile arrives or fails.
+    arrivals: Mutex<u64>,
+    arrival_cv: Condvar,
+    clock: Mutex<Clock>,
+    tile_budget: u64,
+    pinned: u64,
+    epoch: AtomicU64,
+    readers: [Box<[CachePadded<AtomicUsize>]>; 2],
+    grace: Mutex<()>,
+    lookups: Box<[CachePadded<AtomicU64>]>,
+    misses: AtomicU64,
+    requested: AtomicU64,
+    loaded: AtomicU64,
+    evicted: AtomicU64,
+    bytes_loaded: AtomicU64,
+    corrupt: AtomicU64,
+    peak: AtomicU64,
+    load_ns: AtomicU64,
+    grace_ns: AtomicU64,
+    first_error: Mutex<Option<SceneError>>,
+    shutdown: AtomicBool,
+}
+
+/// The clock: a hand over tile numbers and the resident (or reserved) byte count.
+struct Clock {
+    hand: usize,
+    bytes: u64,
+}
+
+/// Proof that the holder may read available tiles: while any pin taken before an eviction
+/// lives, the evicted tile's pages are not released. Hold it across one traversal (or a
+/// sample's rays), never while waiting for a tile.
+pub struct Pin<'p> {
+    pager: &'p Shared,
+    parity: usize,
+    stripe: usize,
+}
+
+impl Drop for Pin<'_> {
+    fn drop(&mut self) {
+        self.pager.readers[self.parity][self.stripe].fetch_sub(1, Release);
+    }
+}
+
+thread_local! {
+    static STRIPE: usize = {
+        static NEXT: AtomicUsize = AtomicUsize::new(0);
+        NEXT.fetch_add(1, Relaxed) % STRIPES
+    };
+}
+
+fn stripe() -> usize {
+    STRIPE.with(|s| *s)
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+fn pages(len: u64, off: u64) -> u64 {
+    (off + len).div_ceil(PAGE) * PAGE - off / PAGE * PAGE
+}
+
+impl Pager {
+    /// Starts paging `scene` within `opts.budget` bytes: the pinned tables are made resident
+    /// now, tiles when traversal first asks for them. Fails when the budget cannot hold the
+    /// tables plus two of the largest tiles.
+    pub fn new(scene: Arc<Scene>, opts: PagerOptions) -> Result<Pager, PagerError> {
+        let path = scene.path().display().to_string();
+        let io = |e: std::io::Error| PagerError::Io { path: path.clone(), msg: e.to_string() };
+        let file = File::open(scene.path()).map_err(io)?;
+        scene.advise_random().map_err(io)?;
+        let n = scene.tiles().len();
+        let cost: Vec<u64> = (0..n as u32)
+            .map(|t| scene.tile_ranges(t).unwrap_or_default().iter().map(|&(o, l)| pages(l, o)).sum())
+            .collect();
+        let pinned: u64 = scene.pinned_ranges().iter().map(|&(o, l)| pages(l, o)).sum();
+        let max_tile = cost.iter().copied().max().unwrap_or(0);
+        let need = pinned + 2 * max_tile;
+        if opts.budget < need {
+            return Err(PagerError::BudgetTooSmall {
+                path,
+                budget: format_size(opts.budget),
+                need: format_size(need),
+                pinned: format_size(pinned),
+                tile: format_size(max_tile),
+            });
+        }
+        // Make the pinned tables resident now (one pass over them).
+        let bytes = scene.bytes();
+        let mut sum = 0u8;
+        for (o, l) in scene.pinned_ranges() {
+            let end = (o + l).min(bytes.len() as u64);
+            let mut i = o / PAGE * PAGE;
+            while i < end {
+                sum ^= bytes[i as usize];
+                i += PAGE;
+            }
+        }
+        std::hint::black_box(sum);
+        let stripes = || (0..STRIPES).map(|_| CachePadded::new(AtomicUsize::new(0))).collect::<Box<[_]>>();
+        let shared = Arc::new(Shared {
+            file,
+            state: (0..n).map(|_| AtomicU32::new(0)).collect(),
+            want: (0..n).map(|_| AtomicU32::new(0)).collect(),
+            cost,
+            releases: (0..n).map(|_| AtomicU32::new(0)).collect(),
+            loaded_at: (0..n).map(|_| AtomicU64::new(0)).collect(),
+            start: Instant::now(),
+            queue: Mutex::new(Vec::new()),
+            queue_cv: Condvar::new(),
+            arrivals: Mutex::new(0),
+            arrival_cv: Condvar::new(),
+            clock: Mutex::new(Clock { hand: 0, bytes: 0 }),
+            tile_budget: opts.budget - pinned,
+            pinned,
+            epoch: AtomicU64::new(0),
+            readers: [stripes(), stripes()],
+            grace: Mutex::new(()),
+            lookups: (0..STRIPES).map(|_| CachePadded::new(AtomicU64::new(0))).collect(),
+            misses: AtomicU64::new(0),
+            requested: AtomicU64::new(0),
+            loaded: AtomicU64::new(0),
+            evicted: AtomicU64::new(0),
+            bytes_loaded: AtomicU64::new(0),
+            corrupt: AtomicU64::new(0),
+            peak: AtomicU64::new(0),
+            load_ns: AtomicU64::new(0),
+            grace_ns: AtomicU64::new(0),
+            first_error: Mutex::new(None),
+            shutdown: AtomicBool::new(false),
+            scene,
+        });
+        let fetchers = (0..opts.fetchers.max(1))
+            .map(|i| {
+                let s = shared.clone();
+                std::thread::Builder::new()
+                    .name(format!("megaray-fetch-{i}"))
+                    .spawn(move || s.fetch_loop())
+                    .expect("spawning a fetcher thread")
+            })
+            .collect();
+        Ok(Pager { shared, fetchers })
+    }
+
+    /// The smallest budget [`Pager::new`] accepts for `scene`: its pinned tables plus two of
+    /// its largest tiles.
+    pub fn min_budget(scene: &Scene) -> u64 {
+        let pinned: u64 = scene.pinned_ranges().iter().map(|&(o, l)| pages(l, o)).sum();
+        let max_tile = (0..scene.tiles().len() as u32)
+            .map(|t| scene.tile_ranges(t).unwrap_or_default().iter().map(|&(o, l)| pages(l, o)).sum::<u64>())
+            .max()
+            .unwrap_or(0);
+        pinned + 2 * max_tile
+    }
+
+    /// The scene being paged.
+    pub fn scene(&self) -> &Arc<Scene> {
+        &self.shared.scene
+    }
+
+    /// Pins the calling thread: tiles seen available stay readable until the pin drops.
+    #[inline]
+    pub fn pin(&self) -> Pin<'_> {
+        self.shared.pin()
+    }
+
+    /// The tile table lookup that traversal makes before it enters tile `t` (under a
+    /// [`Pin`]): [`Access::Ready`] marks the tile referenced; [`Access::Missing`] requests it.
+    #[inline]
+    pub fn acquire(&self, t: u32) -> Access {
+        let s = &self.shared;
+        s.lookups[stripe()].fetch_add(1, Relaxed);
+        let Some(word) = s.state.get(t as usize) else { return Access::Corrupt };
+        // SeqCst: ordered after the pin's epoch check (see `Shared::pin`).
+        let st = word.load(SeqCst);
+        if st & AVAIL != 0 {
+            if st & (REFD | FRESH) != REFD {
+                word.fetch_or(REFD, Relaxed);
+                word.fetch_and(!FRESH, Relaxed);
+            }
+            return Access::Ready;
+        }
+        if st & CORRUPT != 0 {
+            return Access::Corrupt;
+        }
+        s.misses.fetch_add(1, Relaxed);
+        self.request(t);
+        Access::Missing
+    }
+
+    /// Asks for tile `t` (a prefetch, or a miss). Deduplicated: a tile already asked for
+    /// only gains priority.
+    pub fn request(&self, t: u32) {
+        let s = &self.shared;
+        let Some(word) = s.state.get(t as usize) else { return };
+        s.want[t as usize].fetch_add(1, Relaxed);
+        let old = word.fetch_or(REQ, SeqCst);
+        if old & (REQ | AVAIL | CORRUPT) == 0 {
+            s.requested.fetch_add(1, Relaxed);
+            lock(&s.queue).push(t);
+            s.queue_cv.notify_one();
+        } else if old & REQ == 0 {
+            // Already there (or never will be): undo the flag.
+            word.fetch_and(!REQ, SeqCst);
+        }
+    }
+
+    /// Whether tile `t` has settled since it was asked for: resident, or found corrupt.
+    pub fn settled(&self, t: u32) -> bool {
+        self.shared.state.get(t as usize).is_none_or(|w| w.load(SeqCst) & (AVAIL | CORRUPT) != 0)
+    }
+
+    /// The number of tiles published so far (loaded or failed); pass it to
+    /// [`Pager::wait_arrival`].
+    pub fn arrivals(&self) -> u64 {
+        *lock(&self.shared.arrivals)
+    }
+
+    /// Waits until more than `seen` tiles have been published, or `timeout` passes.
+    pub fn wait_arrival(&self, seen: u64, timeout: Duration) -> u64 {
+        let g = lock(&self.shared.arrivals);
+        let (g, _) =
+            self.shared.arrival_cv.wait_timeout_while(g, timeout, |n| *n <= seen).unwrap_or_else(|p| p.into_inner());
+        *g
+    }
+
+    /// Counters since the start.
+    pub fn stats(&self) -> PagerStats {
+        let s = &self.shared;
+        PagerStats {
+            requested: s.requested.load(Relaxed),
+            loaded: s.loaded.load(Relaxed),
+            evicted: s.evicted.load(Relaxed),
+            bytes_loaded: s.bytes_loaded.load(Relaxed),
+            lookups: s.lookups.iter().map(|c| c.load(Relaxed)).sum(),
+            misses: s.misses.load(Relaxed),
+            corrupt: s.corrupt.load(Relaxed),
+            resident: lock(&s.clock).bytes,
+            peak_resident: s.peak.load(Relaxed),
+            pinned: s.pinned,
+            tile_budget: s.tile_budget,
+            load_secs: s.load_ns.load(Relaxed) as f64 * 1e-9,
+            grace_secs: s.grace_ns.load(Relaxed) as f64 * 1e-9,
+        }
+    }
+
+    /// The first corrupt tile met, if any: renderers report it after a frame.
+    pub fn first_error(&self) -> Option<SceneError> {
+        lock(&self.shared.first_error).clone()
+    }
+
+    /// How many times tile `t`'s pages have been released. A reader that saw the tile
+    /// available under a pin sees this number unchanged until the pin drops (the grace
+    /// period's promise; the stress tests check it).
+    pub fn release_count(&self, t: u32) -> u32 {
+        self.shared.releases.get(t as usize).map_or(0, |r| r.load(SeqCst))
+    }
+
+    /// Whether tile `t` is resident now (for tests and statistics).
+    pub fn is_resident(&self, t: u32) -> bool {
+        self.shared.state.get(t as usize).is_some_and(|w| w.load(SeqCst) & AVAIL != 0)
+    }
+}
+
+impl Drop for Pager {
+    fn drop(&mut self) {
+        self.shared.shutdown.store(true, SeqCst);
+        {
+            let _q = lock(&self.shared.queue);
+            self.shared.queue_cv.notify_all();
+        }
+        for f in self.fetchers.drain(..) {
+            let _ = f.join();
+        }
+    }
+}
+
+impl Shared {
+    #[inline]
+    fn pin(&self) -> Pin<'_> {
+        let stripe = stripe();
+        loop {
+            let e = self.epoch.load(SeqCst);
+            let parity = (e & 1) as usize;
+            self.readers[parity][stripe].fetch_add(1, SeqCst);
+            // If the epoch is unchanged, any evictor that flips it later will wait for this
+            // count; if it changed, an eviction may have missed us: count again under the
+            // new parity (and see its cleared availability bits).
+            if self.epoch.load(SeqCst) == e {
+                return Pin { pager: self, parity, stripe };
+            }
+            self.readers[parity][stripe].fetch_sub(1, Release);
+        }
+    }
+
+    /// Waits until every pin taken before now has dropped.
+    fn synchronize(&self) {
+        let _g = lock(&self.grace);
+        let t0 = Instant::now();
+        fence(SeqCst);
+        let old = self.epoch.fetch_add(1, SeqCst);
+        let parity = (old & 1) as usize;
+        let mut spins = 0u32;
+        while self.readers[parity].iter().any(|c| c.load(SeqCst) != 0) {
+            spins += 1;
+            if spins < 64 {
+                std::hint::spin_loop();
+            } else if spins < 256 {
+                std::thread::yield_now();
+            } else {
+                std::thread::sleep(Duration::from_micros(50));
+            }
+        }
+        self.grace_ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
+    }
+
+    /// The most-wanted queued tile, waiting for one; `None` at shutdown.
+    fn next_request(&self) -> Option<u32> {
+        let mut q = lock(&self.queue);
+        loop {
+            if self.shutdown.load(SeqCst) {
+                return None;
+            }
+            if !q.is_empty() {
+                let (i, _) = q.iter().enumerate().max_by_key(|&(_, &t)| self.want[t as usize].load(Relaxed))?;
+                return Some(q.swap_remove(i));
+            }
+            q = self.queue_cv.wait(q).unwrap_or_else(|p| p.into_inner());
+        }
+    }
+
+    fn fetch_loop(&self) {
+        while let Some(t) = self.next_request() {
+            let st = self.state[t as usize].load(SeqCst);
+            if st & (AVAIL | CORRUPT) != 0 {
+                self.state[t as usize].fetch_and(!REQ, SeqCst);
+                continue;
+            }
+            if st & EVICTING != 0 {
+                // Its pages are being released by another fetcher: ask again shortly.
+                lock(&self.queue).push(t);
+                std::thread::sleep(Duration::from_micros(200));
+                continue;
+            }
+            self.load(t);
+        }
+    }
+
+    /// Makes room for tile `t` (evicting), reads and checks it, and publishes it.
+    fn load(&self, t: u32) {
+        let cost = self.cost[t as usize];
+        let victims = self.make_room(cost);
+        if !victims.is_empty() {
+            self.synchronize();
+            for &v in &victims {
+                self.release(v);
+                self.state[v as usize].fetch_and(!EVICTING, SeqCst);
+            }
+            self.evicted.fetch_add(victims.len() as u64, Relaxed);
+        }
+        let t0 = Instant::now();
+        let scene = &*self.scene;
+        let ranges = scene.tile_ranges(t).unwrap_or_default();
+        for &(o, l) in &ranges {
+            let _ = scene.will_need(o, l);
+        }
+        // The check reads every byte of the tile through the map (faulting its pages in);
+        // the attribute ranges are touched a page at a time.
+        let checked = scene.check_tile(t);
+        let bytes = scene.bytes();
+        let mut sum = 0u8;
+        for &(o, l) in &ranges[1..] {
+            let mut i = o;
+            while i < o + l {
+                sum ^= bytes[i as usize];
+                i = (i / PAGE + 1) * PAGE;
+            }
+        }
+        std::hint::black_box(sum);
+        self.load_ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
+        let word = &self.state[t as usize];
+        match checked {
+            Ok(()) => {
+                self.bytes_loaded.fetch_add(cost, Relaxed);
+                self.loaded.fetch_add(1, Relaxed);
+                self.want[t as usize].store(0, Relaxed);
+                // Referenced and fresh: a tile just loaded for waiting rays is not evicted
+                // before they used it (or FRESH_MS passed).
+                self.loaded_at[t as usize].store(self.start.elapsed().as_millis() as u64, Relaxed);
+                word.fetch_or(AVAIL | REFD | FRESH, SeqCst);
+                word.fetch_and(!REQ, SeqCst);
+            }
+            Err(e) => {
+                self.corrupt.fetch_add(1, Relaxed);
+                lock(&self.first_error).get_or_insert(e);
+                self.release(t);
+                lock(&self.clock).bytes -= cost;
+                word.fetch_or(CORRUPT, SeqCst);
+                word.fetch_and(!REQ, SeqCst);
+            }
+        }
+        let mut n = lock(&self.arrivals);
+        *n += 1;
+        self.arrival_cv.notify_all();
+    }
+
+    /// Reserves `cost` bytes for a tile about to load, choosing victims by the clock until
+    /// the reservation fits (evicting down to the low watermark once over the budget).
+    /// Victims are no longer available when this returns; their pages are still mapped.
+    fn make_room(&self, cost: u64) -> Vec<u32> {
+        let mut c = lock(&self.clock);
+        let mut victims = Vec::new();
+        let low = (self.tile_budget - self.tile_budget / 16).saturating_sub(cost);
+        let n = self.state.len();
+        let mut sweeps = 0u32;
+        while c.bytes + cost > self.tile_budget {
+            if sweeps > 0 {
+                if self.shutdown.load(Relaxed) {
+                    break;
+                }
+                // Everything resident is fresh (loaded for rays that have not used it yet):
+                // wait for them rather than exceed the budget.
+                drop(c);
+                std::thread::sleep(Duration::from_millis(1));
+                c = lock(&self.clock);
+            }
+            sweeps += 1;
+            let now = self.start.elapsed().as_millis() as u64;
+            // Two full sweeps clear every referenced bit once and then evict; a third is
+            // only needed if tiles became referenced again meanwhile.
+            let mut steps = 0;
+            while c.bytes > low && steps < 3 * n {
+                let v = c.hand;
+                c.hand = (c.hand + 1) % n;
+                steps += 1;
+                let word = &self.state[v];
+                let st = word.load(SeqCst);
+                if st & AVAIL == 0 {
+                    continue;
+                }
+                if st & FRESH != 0 && now.saturating_sub(self.loaded_at[v].load(Relaxed)) < FRESH_MS {
+                    continue;
+                }
+                if st & REFD != 0 {
+                    word.fetch_and(!REFD, Relaxed);
+                    continue;
+                }
+                // Evict: no longer available (new lookups miss), pages released after the
+                // grace period.
+                let prev = word.fetch_and(!AVAIL, SeqCst);
+                if prev & AVAIL == 0 {
+                    continue;
+                }
+                word.fetch_or(EVICTING, SeqCst);
+                c.bytes -= self.cost[v];
+                victims.push(v as u32);
+            }
+        }
+        c.bytes += cost;
+        self.peak.fetch_max(c.bytes, Relaxed);
+        victims
+    }
+
+    /// Drops tile `t`'s pages from this process and from the page cache.
+    fn release(&self, t: u32) {
+        self.releases[t as usize].fetch_add(1, SeqCst);
+        for (o, l) in self.scene.tile_ranges(t).unwrap_or_default() {
+            let _ = self.scene.release(o, l);
+            // SAFETY: posix_fadvise only takes integers and a file descriptor that `self.file`
+            // keeps open; it reads no memory of ours.
+            unsafe {
+                libc::posix_fadvise(
+                    self.file.as_raw_fd(),
+                    o as libc::off_t,
+                    l as libc::off_t,
+                    libc::POSIX_FADV_DONTNEED,
+                );
+            }
+        }
+    }
+}

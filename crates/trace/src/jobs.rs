@@ -1,0 +1,326 @@
+//! Work that traces rays and never stalls on a missing tile.
+//!
+//! [`run`] executes `n` jobs (a renderer's jobs are pixels or pixel samples) over the
+//! threads of the current rayon pool. A job fires its rays through a [`Replay`], which
+//! implements [`RayCaster`]. On a paged tracer, a ray that needs an absent tile makes the
+//! job return [`Suspended`]; the job is *parked* with its ray log and the thread goes on
+//! with other jobs (ray reordering, as in Wald et al. 2002). When the tile has arrived the
+//! job runs again from the start: the rays it already fired are answered from its log, the
+//! ray that stopped resumes its saved traversal ([`Tracer::resume`]), so no work is lost and
+//! each traversal needs one tile at a time. Jobs must therefore be deterministic (the same
+//! index fires the same rays); a job that is not is still answered correctly (the log is
+//! dropped from the first ray that differs), only slower.
+//!
+//! Threads wait only when every job left is parked; that time is [`JobStats::wait_secs`].
+//! At most [`MAX_PARKED`] jobs are parked at once (bounded memory: a parked job keeps a few
+//! hundred bytes); past that, threads retire parked jobs before taking new ones. With a
+//! deadline, [`run`] returns when it passes and the jobs not finished are `None`.
+
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering::*};
+use std::sync::{Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+use megaray_base::Ray;
+use megaray_scene::Scene;
+use rayon::prelude::*;
+
+use crate::{Hit, Pending, RayCaster, Suspended, Traced, Tracer};
+
+/// The most jobs parked at once.
+pub const MAX_PARKED: usize = 1 << 16;
+
+/// How to run jobs.
+#[derive(Clone, Copy, Debug)]
+pub struct JobOptions {
+    /// Jobs a thread takes at a time (neighbouring indices: keep them coherent).
+    pub chunk: usize,
+    /// Stop when this passes, leaving the remaining jobs unfinished.
+    pub deadline: Option<Instant>,
+}
+
+impl Default for JobOptions {
+    fn default() -> JobOptions {
+        JobOptions { chunk: 64, deadline: None }
+    }
+}
+
+/// What happened while running jobs.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct JobStats {
+    /// Jobs run to the end.
+    pub finished: u64,
+    /// Jobs left unfinished at the deadline.
+    pub unfinished: u64,
+    /// Times a job was suspended (parked) for a missing tile.
+    pub suspended: u64,
+    /// Rays fired (answered from logs on re-runs are not counted again).
+    pub rays: u64,
+    /// Seconds threads spent waiting because every job left was parked, summed over threads.
+    pub wait_secs: f64,
+}
+
+/// The results of [`run`]: one slot per job, `None` when it did not finish by the deadline.
+pub struct JobsResult<T> {
+    pub results: Vec<Option<T>>,
+    pub stats: JobStats,
+}
+
+/// One query a job made, in order.
+enum Logged {
+    Hit(Ray, Option<Hit>),
+    Occluded(Ray, bool),
+    Pending(Ray, Pending),
+}
+
+/// The [`RayCaster`] jobs fire their rays through: answers from the job's log first (when it
+/// is re-run after a suspension), then from the tracer.
+pub struct Replay<'t, 's> {
+    tracer: &'t Tracer<'s>,
+    log: Vec<Logged>,
+    cursor: usize,
+    waiting: Option<u32>,
+    rays: u64,
+}
+
+impl<'t, 's> Replay<'t, 's> {
+    /// A caster with an empty log.
+    pub fn new(tracer: &'t Tracer<'s>) -> Replay<'t, 's> {
+        Replay { tracer, log: Vec::new(), cursor: 0, waiting: None, rays: 0 }
+    }
+
+    fn restart(&mut self, log: Vec<Logged>) {
+        self.log = log;
+        self.cursor = 0;
+        self.waiting = None;
+    }
+
+    fn query(&mut self, ray: &Ray, any: bool) -> Result<Option<Hit>, Suspended> {
+        if self.tracer.pager().is_none() {
+            // Nothing can suspend: no log.
+            self.rays += 1;
+            return Ok(if any { self.tracer.occluded(ray).then_some(HIT_ANY) } else { self.tracer.intersect(ray) });
+        }
+        let traced = if self.cursor < self.log.len() {
+            let same = |r: &Ray| r.org == ray.org && r.dir == ray.dir && r.t_min == ray.t_min && r.t_max == ray.t_max;
+            match &self.log[self.cursor] {
+                Logged::Hit(r, h) if !any && same(r) => {
+                    self.cursor += 1;
+                    return Ok(*h);
+                }
+                Logged::Occluded(r, o) if any && same(r) => {
+                    self.cursor += 1;
+                    return Ok(o.then_some(HIT_ANY));
+                }
+                Logged::Pending(r, p) if same(r) && p.any == any => {
+                    let Logged::Pending(_, p) = self.log.swap_remove(self.cursor) else { unreachable!() };
+                    // swap_remove moved the last entry here; the pending one was the last
+                    // (a job stops at its first pending ray), so nothing moved.
+                    self.tracer.resume(ray, p)
+                }
+                _ => {
+                    // The job fired a different ray than last time: forget the rest.
+                    self.log.truncate(self.cursor);
+                    self.rays += 1;
+                    if any {
+                        self.tracer.try_occluded(ray)
+                    } else {
+                        self.tracer.try_intersect(ray)
+                    }
+                }
+            }
+        } else {
+            self.rays += 1;
+            if any {
+                self.tracer.try_occluded(ray)
+            } else {
+                self.tracer.try_intersect(ray)
+            }
+        };
+        self.log.truncate(self.cursor);
+        match traced {
+            Traced::Done(h) => {
+                self.log.push(if any { Logged::Occluded(*ray, h.is_some()) } else { Logged::Hit(*ray, h) });
+                self.cursor += 1;
+                Ok(if any { h.map(|_| HIT_ANY) } else { h })
+            }
+            Traced::Pending(p) => {
+                self.waiting = Some(p.tile());
+                self.log.push(Logged::Pending(*ray, p));
+                Err(Suspended)
+            }
+        }
+    }
+}
+
+/// A stand-in hit for any-hit answers (only `is_some` matters).
+const HIT_ANY: Hit = Hit { t: 0.0, u: 0.0, v: 0.0, part: 0, prim: 0, tri: [[0.0; 3]; 3] };
+
+impl RayCaster for Replay<'_, '_> {
+    fn scene(&self) -> &Scene {
+        self.tracer.scene()
+    }
+    fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended> {
+        self.query(ray, false)
+    }
+    fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended> {
+        self.query(ray, true).map(|h| h.is_some())
+    }
+}
+
+/// A suspended job: its index and its ray log.
+struct Parked {
+    index: usize,
+    log: Vec<Logged>,
+}
+
+/// Parked jobs by the tile they wait for.
+#[derive(Default)]
+struct ParkLot {
+    by_tile: HashMap<u32, Vec<Parked>>,
+    count: usize,
+}
+
+/// Runs jobs `0..n` on the current rayon pool; see the module documentation.
+pub fn run<T, F>(tracer: &Tracer, n: usize, opts: &JobOptions, job: F) -> JobsResult<T>
+where
+    T: Send + Sync,
+    F: Fn(usize, &mut Replay) -> Result<T, Suspended> + Sync,
+{
+    let results: Vec<OnceLock<T>> = (0..n).map(|_| OnceLock::new()).collect();
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let lot = Mutex::new(ParkLot::default());
+    let suspended = AtomicU64::new(0);
+    let rays = AtomicU64::new(0);
+    let wait_ns = AtomicU64::new(0);
+    let late = AtomicBool::new(false);
+    let chunk = opts.chunk.max(1);
+    let pager = tracer.pager();
+    let lock = || lot.lock().unwrap_or_else(|p| p.into_inner());
+
+    // Runs job `i` with `log`; parks it if it suspends.
+    let attempt = |i: usize, log: Vec<Logged>, replay: &mut Replay| {
+        replay.restart(log);
+        let r = {
+            let _pin = pager.map(|p| p.pin());
+            job(i, replay)
+        };
+        match r {
+            Ok(v) => {
+                let _ = results[i].set(v);
+                done.fetch_add(1, SeqCst);
+                None
+            }
+            Err(Suspended) => {
+                let tile = replay
+                    .waiting
+                    .take()
+                    .expect("a job suspended without a pending ray (it returned Suspended itself)");
+                suspended.fetch_add(1, Relaxed);
+                Some((tile, Parked { index: i, log: std::mem::take(&mut replay.log) }))
+            }
+        }
+    };
+
+    let threads = rayon::current_num_threads().max(1);
+    (0..threads).into_par_iter().for_each(|_| {
+        let mut replay = Replay::new(tracer);
+        let mut to_park: Vec<(u32, Parked)> = Vec::new();
+        let mut seen_arrivals = u64::MAX;
+        loop {
+            if opts.deadline.is_some_and(|d| Instant::now() >= d) {
+                late.store(true, SeqCst);
+            }
+            if late.load(Relaxed) || done.load(SeqCst) == n {
+                break;
+            }
+            // Parked jobs whose tiles have arrived, when anything arrived since we looked.
+            let mut ready = Vec::new();
+            let arrivals = pager.map_or(0, |p| p.arrivals());
+            if let Some(p) = pager {
+                if arrivals != seen_arrivals {
+                    seen_arrivals = arrivals;
+                    let mut l = lock();
+                    // Tiles that arrived; the others are asked for again (deduplicated), in
+                    // case one arrived and was evicted before its jobs ran.
+                    let tiles: Vec<u32> = l
+                        .by_tile
+                        .keys()
+                        .copied()
+                        .filter(|&t| {
+                            let ok = p.settled(t);
+                            if !ok {
+                                p.request(t);
+                            }
+                            ok
+                        })
+                        .collect();
+                    for t in tiles {
+                        let jobs = l.by_tile.remove(&t).unwrap_or_default();
+                        l.count -= jobs.len();
+                        ready.extend(jobs);
+                    }
+                }
+            }
+            let crowded = lock().count >= MAX_PARKED;
+            if ready.is_empty() && !crowded {
+                let start = next.fetch_add(chunk, SeqCst);
+                if start < n {
+                    for i in start..(start + chunk).min(n) {
+                        if let Some(p) = attempt(i, Vec::new(), &mut replay) {
+                            to_park.push(p);
+                        }
+                    }
+                } else if done.load(SeqCst) < n {
+                    // No new work: the jobs left are running on other threads or parked.
+                    let Some(p) = pager else { break };
+                    if lock().count == 0 {
+                        std::thread::sleep(Duration::from_micros(200));
+                        continue;
+                    }
+                    let t0 = Instant::now();
+                    let timeout = opts.deadline.map_or(Duration::from_millis(50), |d| {
+                        d.saturating_duration_since(t0).min(Duration::from_millis(50))
+                    });
+                    p.wait_arrival(arrivals, timeout);
+                    wait_ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
+                    seen_arrivals = u64::MAX;
+                }
+            } else if ready.is_empty() {
+                // Too many parked: wait for tiles before taking new work.
+                let p = pager.expect("jobs are parked only on paged tracers");
+                let t0 = Instant::now();
+                p.wait_arrival(arrivals, Duration::from_millis(50));
+                wait_ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
+                seen_arrivals = u64::MAX;
+            }
+            for job in ready {
+                if let Some(p) = attempt(job.index, job.log, &mut replay) {
+                    to_park.push(p);
+                }
+            }
+            if !to_park.is_empty() {
+                let mut l = lock();
+                l.count += to_park.len();
+                for (t, p) in to_park.drain(..) {
+                    l.by_tile.entry(t).or_default().push(p);
+                }
+            }
+        }
+        rays.fetch_add(replay.rays, Relaxed);
+    });
+
+    let results: Vec<Option<T>> = results.into_iter().map(|c| c.into_inner()).collect();
+    let finished = results.iter().filter(|r| r.is_some()).count() as u64;
+    JobsResult {
+        stats: JobStats {
+            finished,
+            unfinished: n as u64 - finished,
+            suspended: suspended.load(Relaxed),
+            rays: rays.load(Relaxed),
+            wait_secs: wait_ns.load(Relaxed) as f64 * 1e-9,
+        },
+        results,
+    }
+}
