@@ -68,7 +68,7 @@ impl EnvMap {
             Some(image::ImageFormat::Hdr) | Some(image::ImageFormat::OpenExr) => {}
             _ => return Err(err("not a Radiance .hdr or OpenEXR .exr file".into())),
         }
-        let img = reader.decode().map_err(|e| err(e.to_string()))?.into_rgb32f();
+        let img = reader.decode().map_err(|e| err(format!("malformed or truncated image data ({e})")))?.into_rgb32f();
         let (width, height) = img.dimensions();
         if width == 0 || height == 0 {
             return Err(err("the image is empty".into()));

@@ -124,6 +124,26 @@ impl Image {
         })
     }
 
+    /// The root mean square difference from `reference` over all pixels and channels,
+    /// divided by the reference's mean value: "RMSE below 1 %" means below 0.01.
+    pub fn relative_rmse(&self, reference: &Image) -> f64 {
+        assert_eq!(self.pixels.len(), reference.pixels.len(), "images of different sizes");
+        let (mut se, mut sum) = (0.0f64, 0.0f64);
+        for (p, q) in self.pixels.iter().zip(&reference.pixels) {
+            for k in 0..3 {
+                se += ((p[k] - q[k]) as f64).powi(2);
+                sum += q[k] as f64;
+            }
+        }
+        let n = (3 * self.pixels.len()).max(1) as f64;
+        let mean = sum / n;
+        if mean > 0.0 {
+            (se / n).sqrt() / mean
+        } else {
+            (se / n).sqrt()
+        }
+    }
+
     /// Writes a linear float OpenEXR file (see [`save_exr`]).
     pub fn save_exr(&self, path: &Path, aovs: Option<&Aovs>) -> Result<(), ImageError> {
         save_exr(self, aovs, path)
