@@ -43,11 +43,15 @@ const BAYER4: [[u32; 4]; 4] = [[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15
 /// The light subset (of `subsets`) that sample `index` of pixel (`px`, `py`) shades with
 /// (interleaved sampling, Keller and Heidrich 2001). The pattern repeats every 4x4 pixels
 /// (a Bayer matrix, so neighbours differ) and moves on by one subset per sample index, so
-/// every pixel cycles through all subsets in `subsets` successive samples.
+/// every pixel cycles through all subsets in `subsets` successive samples. Each cycle
+/// starts at a different, hashed, offset: the sub-pixel positions ([`pixel_offset`]) of
+/// samples `i` and `i + subsets` are close, and without the offset a subset would always
+/// be paired with the same part of the pixel (an error that never averages out).
 #[inline]
 pub fn light_subset(px: u32, py: u32, index: u32, subsets: u32) -> u32 {
     let m = subsets.max(1);
-    (BAYER4[(py % 4) as usize][(px % 4) as usize] + index % m) % m
+    let cycle_shift = hash32((index / m).wrapping_add(0x51ed_270b)) % m;
+    (BAYER4[(py % 4) as usize][(px % 4) as usize] + index % m + cycle_shift) % m
 }
 
 /// The random numbers of one sample: dimension after dimension of a per-pixel shifted R2 /
