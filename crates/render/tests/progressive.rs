@@ -15,7 +15,12 @@ use megaray_trace::Tracer;
 fn error_falls_as_one_over_sqrt_frames() {
     let dir = tempfile::tempdir().unwrap();
     let mut obj = Obj::default();
-    obj.quad([Vec3::new(-4.0, 0.0, -4.0), Vec3::new(-4.0, 0.0, 4.0), Vec3::new(4.0, 0.0, 4.0), Vec3::new(4.0, 0.0, -4.0)]);
+    obj.quad([
+        Vec3::new(-4.0, 0.0, -4.0),
+        Vec3::new(-4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, -4.0),
+    ]);
     obj.sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, 12, true);
     obj.sphere(Vec3::new(1.8, 0.5, 1.0), 0.5, 8, false);
     let path = obj.build(dir.path(), "balls", None);
