@@ -351,13 +351,13 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             bail!("--time must be a positive number of seconds");
         }
     }
-    if !(a.env_scale >= 0.0 && a.env_scale.is_finite()) || !a.env_rotate.is_finite() {
+    if !(a.env_scale >= 0.0 && a.env_scale.is_finite() && a.env_rotate.is_finite()) {
         bail!("--env-scale must be a number >= 0 and --env-rotate a number");
     }
     if !(1..=1 << 20).contains(&a.env_lights) || !(1..=4096).contains(&a.light_subsets) {
         bail!("--env-lights must be 1..=1048576 and --light-subsets 1..=4096");
     }
-    if a.light_samples > 4096 || a.max_depth > 64 || !(a.ao_radius > 0.0) {
+    if a.light_samples > 4096 || a.max_depth > 64 || a.ao_radius.is_nan() || a.ao_radius <= 0.0 {
         bail!("--light-samples must be at most 4096, --max-depth at most 64, --ao-radius above 0");
     }
     if !a.exposure.is_finite() {

@@ -67,7 +67,7 @@ enum Command {
     ///   megaray render plant.mray -o plant.png --sky sky:sun_elev=30 --shader env --frames 16
     ///   megaray render plant.mray -o plant.exr --env sky.hdr --env-rotate 90 --time 10 --aov depth,normal,albedo
     #[command(verbatim_doc_comment)]
-    Render(cmd::RenderArgs),
+    Render(Box<cmd::RenderArgs>),
     /// Describe a scene file: triangles, bounds, parts, tree depths, tiles, bytes per triangle.
     Info(cmd::InfoArgs),
     /// Generate a power plant, build it out of core, render it: the whole pipeline.
@@ -109,7 +109,7 @@ fn main() {
     let res = match cli.cmd {
         Command::Gen(a) => cmd::gen(a, &bars),
         Command::Build(a) => cmd::build(a, &bars),
-        Command::Render(a) => cmd::render(a, &bars),
+        Command::Render(a) => cmd::render(*a, &bars),
         Command::Info(a) => cmd::info(a),
         Command::Demo(a) => cmd::demo(a, &bars),
         Command::Bench(a) => bench::bench(a, &bars),

@@ -194,13 +194,13 @@ pub fn save_exr(img: &Image, aovs: Option<&Aovs>, path: &Path) -> Result<(), Ima
 /// Reads an OpenEXR file written by [`save_exr`] (or any file with float or half `R`, `G`,
 /// `B` channels in its first layer): the colour and whatever AOV layers it has.
 pub fn read_exr(path: &Path) -> Result<(Image, Aovs), ImageError> {
-    use exr::prelude::{read_first_flat_layer_from_file, Text};
+    use exr::prelude::read_first_flat_layer_from_file;
     let err = |msg: String| ImageError { path: path.to_path_buf(), msg };
     let img = read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
     let layer = &img.layer_data;
     let (w, h) = (layer.size.0, layer.size.1);
     let get = |name: &str| -> Option<Vec<f32>> {
-        let c = layer.channel_data.list.iter().find(|c| c.name == Text::from(name))?;
+        let c = layer.channel_data.list.iter().find(|c| c.name == *name)?;
         Some(c.sample_data.values_as_f32().collect())
     };
     let three = |a: &str, b: &str, c: &str| -> Option<Vec<[f32; 3]>> {
