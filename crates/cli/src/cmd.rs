@@ -2,16 +2,22 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::Ordering;
-use std::time::Instant;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use megaray_base::{format_size, parse_size, Progress, Vec3};
 use megaray_build::{build_scene, BuildOptions};
 use megaray_gen::GenSpec;
-use megaray_render::{render as render_image, Camera, RenderSettings, DEFAULT_OFFSET};
+use megaray_render::{
+    read_exr, render_progressive, write_env, Builtin, Camera, EnvMap, Environment, RenderSettings, Renderer, SkySpec,
+    Stop, ToneCurve, ToneMap, DEFAULT_OFFSET,
+};
 use megaray_scene::Scene;
 use megaray_trace::Tracer;
+
+use crate::progress::Bars;
 
 fn parse_vec3(s: &str) -> Result<Vec3, String> {
     let v: Vec<f32> = s
@@ -50,10 +56,10 @@ fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 // ---------------------------------------------------------------------------------------
 #[derive(Args)]
 pub struct GenArgs {
-    /// What to generate: grid:N, sphereflake:L[:S] or plant:T (see `megaray gen --help`).
+    /// What to generate: grid:N, sphereflake:L[:S], plant:T or sky:... (see `megaray gen --help`).
     spec: String,
-    /// Output file (binary little-endian PLY).
-    #[arg(short, long, value_name = "FILE.ply")]
+    /// Output file: binary little-endian PLY for models, .hdr (or .exr) for sky.
+    #[arg(short, long, value_name = "FILE")]
     out: PathBuf,
     /// Seed for plant:T (the same seed gives the same plant).
     #[arg(long, default_value_t = 1)]
@@ -61,6 +67,20 @@ pub struct GenArgs {
 }
 
 pub fn gen(a: GenArgs, bars: &dyn Progress) -> Result<()> {
+    if a.spec.starts_with("sky") {
+        let spec: SkySpec = a.spec.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+        let map = spec.map();
+        write_env(&map, &a.out)?;
+        eprintln!(
+            "wrote {}: {}x{} sky, sun at elevation {} azimuth {}",
+            a.out.display(),
+            map.width,
+            map.height,
+            spec.sun_elev,
+            spec.sun_azim
+        );
+        return Ok(());
+    }
     let spec: GenSpec = a.spec.parse()?;
     let spec = spec.with_seed(a.seed);
     let t = Instant::now();
@@ -163,8 +183,8 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
 pub struct RenderArgs {
     /// The scene file.
     scene: PathBuf,
-    /// Output image (.png).
-    #[arg(short, long, value_name = "OUT.png")]
+    /// Output image: .png (tone-mapped sRGB) or .exr (linear float, with --aov layers).
+    #[arg(short, long, value_name = "OUT.png|OUT.exr")]
     out: PathBuf,
     /// Image size.
     #[arg(long, value_name = "WxH", default_value = "1024x1024", value_parser = parse_res)]
@@ -184,18 +204,116 @@ pub struct RenderArgs {
     /// Camera at centre + offset * diagonal (default 0,0.3,1.6; the `close` camera is 0,0.3,0.6).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     cam_offset: Option<Vec3>,
-    /// Direction toward the light.
+    /// Direction toward the directional light (lights diffuse and phong when there is no --env/--sky).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, default_value = "0.5,1,0.8", allow_hyphen_values = true)]
     light: Vec3,
-    /// Samples per pixel (jittered when more than 1).
+    /// Primary samples per pixel per frame (the first frame's first sample is the pixel centre).
     #[arg(long, value_name = "N", default_value_t = 1)]
     spp: u32,
+    /// Shader: normal, diffuse, phong, mirror, glass, ao, env, auto (by material).
+    #[arg(long, value_name = "NAME", default_value = "auto")]
+    shader: String,
+    /// Environment light: a lat-long Radiance .hdr or OpenEXR .exr map.
+    #[arg(long, value_name = "FILE.hdr|FILE.exr", conflicts_with = "sky")]
+    env: Option<PathBuf>,
+    /// Environment light: a procedural sky made in memory, e.g. sky:sun_elev=35,sun_azim=120
+    /// (keys as in `megaray gen --help`).
+    #[arg(long, value_name = "SPEC")]
+    sky: Option<String>,
+    /// Turn the environment about the up (+Y) axis, degrees.
+    #[arg(long, value_name = "DEG", default_value_t = 0.0, allow_hyphen_values = true)]
+    env_rotate: f32,
+    /// Multiply the environment's radiance.
+    #[arg(long, value_name = "X", default_value_t = 1.0)]
+    env_scale: f32,
+    /// Number of virtual directional lights the environment becomes.
+    #[arg(long, value_name = "N", default_value_t = 1024)]
+    env_lights: u32,
+    /// Light subsets for interleaved sampling (neighbouring pixels use different subsets).
+    #[arg(long, value_name = "M", default_value_t = 16)]
+    light_subsets: u32,
+    /// Shadow rays per hit toward the subset's lights (0: all lights of the subset); AO rays per hit.
+    #[arg(long, value_name = "K", default_value_t = 2)]
+    light_samples: u32,
+    /// Frames to accumulate (new sample positions each); default 1, or unlimited with --time.
+    #[arg(long, value_name = "N")]
+    frames: Option<u32>,
+    /// Stop accumulating frames after this many seconds (at least one frame).
+    #[arg(long, value_name = "SECONDS")]
+    time: Option<f64>,
+    /// PNG exposure in stops: radiance is multiplied by 2^EV before tone mapping.
+    #[arg(long, value_name = "EV", default_value_t = 0.0, allow_hyphen_values = true)]
+    exposure: f32,
+    /// PNG tone curve: clamp (radiance 1 is white) or reinhard (x / (1 + x)).
+    #[arg(long, value_name = "CURVE", default_value = "clamp")]
+    tonemap: String,
+    /// Extra EXR layers, comma-separated: depth, normal, albedo.
+    #[arg(long, value_name = "LIST")]
+    aov: Option<String>,
+    /// Mirror and glass bounce limit.
+    #[arg(long, value_name = "N", default_value_t = 6)]
+    max_depth: u32,
+    /// Ambient occlusion distance, as a fraction of the scene diagonal.
+    #[arg(long, value_name = "F", default_value_t = 0.05)]
+    ao_radius: f32,
+    /// After each frame, print the RMSE relative to this reference image (.exr), for
+    /// convergence measurements.
+    #[arg(long, value_name = "REF.exr")]
+    reference: Option<PathBuf>,
+    /// Print the summary as one JSON object.
+    #[arg(long)]
+    json: bool,
     /// Worker threads (default: all cores).
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
 }
 
-pub fn render(a: RenderArgs, _bars: &dyn Progress) -> Result<()> {
+impl RenderArgs {
+    /// Defaults for a scene and an output, as the command line would give them.
+    fn new(scene: PathBuf, out: PathBuf) -> RenderArgs {
+        RenderArgs {
+            scene,
+            out,
+            res: (1024, 1024),
+            eye: None,
+            at: None,
+            up: Vec3::Y,
+            fov: 60.0,
+            cam_offset: None,
+            light: Vec3::new(0.5, 1.0, 0.8),
+            spp: 1,
+            shader: "auto".into(),
+            env: None,
+            sky: None,
+            env_rotate: 0.0,
+            env_scale: 1.0,
+            env_lights: 1024,
+            light_subsets: 16,
+            light_samples: 2,
+            frames: None,
+            time: None,
+            exposure: 0.0,
+            tonemap: "clamp".into(),
+            aov: None,
+            max_depth: 6,
+            ao_radius: 0.05,
+            reference: None,
+            json: false,
+            threads: None,
+        }
+    }
+}
+
+/// Which output format `path` asks for.
+fn is_exr(path: &Path) -> Result<bool> {
+    match path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref() {
+        Some("png") => Ok(false),
+        Some("exr") => Ok(true),
+        _ => bail!("{}: the output must end in .png or .exr", path.display()),
+    }
+}
+
+pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     if !(1..=65536).contains(&a.spp) {
         bail!("--spp must be 1..=65536");
     }
@@ -205,6 +323,56 @@ pub fn render(a: RenderArgs, _bars: &dyn Progress) -> Result<()> {
     if a.light.length() == 0.0 {
         bail!("--light must not be 0,0,0");
     }
+    let shader: Builtin = a.shader.parse().map_err(|e: String| anyhow::anyhow!("--shader: {e}"))?;
+    let curve = match a.tonemap.as_str() {
+        "clamp" => ToneCurve::Clamp,
+        "reinhard" => ToneCurve::Reinhard,
+        other => bail!("--tonemap: unknown curve `{other}` (known: clamp, reinhard)"),
+    };
+    let exr = is_exr(&a.out)?;
+    let (mut aov_depth, mut aov_normal, mut aov_albedo) = (false, false, false);
+    for name in a.aov.as_deref().unwrap_or("").split(',').map(str::trim).filter(|n| !n.is_empty()) {
+        match name {
+            "depth" => aov_depth = true,
+            "normal" => aov_normal = true,
+            "albedo" => aov_albedo = true,
+            other => bail!("--aov: unknown layer `{other}` (known: depth, normal, albedo)"),
+        }
+    }
+    let aovs = aov_depth || aov_normal || aov_albedo;
+    if aovs && !exr {
+        bail!("{}: --aov layers need an .exr output", a.out.display());
+    }
+    if a.frames == Some(0) {
+        bail!("--frames must be at least 1");
+    }
+    if let Some(t) = a.time {
+        if !(t > 0.0 && t.is_finite()) {
+            bail!("--time must be a positive number of seconds");
+        }
+    }
+    if !(a.env_scale >= 0.0 && a.env_scale.is_finite() && a.env_rotate.is_finite()) {
+        bail!("--env-scale must be a number >= 0 and --env-rotate a number");
+    }
+    if !(1..=1 << 20).contains(&a.env_lights) || !(1..=4096).contains(&a.light_subsets) {
+        bail!("--env-lights must be 1..=1048576 and --light-subsets 1..=4096");
+    }
+    if a.light_samples > 4096 || a.max_depth > 64 || a.ao_radius.is_nan() || a.ao_radius <= 0.0 {
+        bail!("--light-samples must be at most 4096, --max-depth at most 64, --ao-radius above 0");
+    }
+    if !a.exposure.is_finite() {
+        bail!("--exposure must be a number");
+    }
+    // The environment, read before the scene so that a bad map fails fast.
+    let map = match (&a.env, &a.sky) {
+        (Some(p), _) => Some(EnvMap::load(p)?),
+        (None, Some(spec)) => Some(spec.parse::<SkySpec>().map_err(|e| anyhow::anyhow!("--sky: {e}"))?.map()),
+        (None, None) => None,
+    };
+    let reference = match &a.reference {
+        Some(p) => Some(read_exr(p)?.0),
+        None => None,
+    };
     let scene = Scene::open(&a.scene)?;
     let b = scene.header().bounds;
     let (w, h) = a.res;
@@ -213,20 +381,100 @@ pub fn render(a: RenderArgs, _bars: &dyn Progress) -> Result<()> {
     if (at - eye).length() == 0.0 || (at - eye).normalize().cross(a.up.normalize_or_zero()).length() < 1e-6 {
         bail!("--eye, --at and --up do not make a camera (eye equals at, or up is parallel to the view)");
     }
+    if let Some(r) = &reference {
+        if (r.width, r.height) != (w, h) {
+            bail!(
+                "{}: the reference is {}x{}, the image {w}x{h}",
+                a.reference.as_ref().unwrap().display(),
+                r.width,
+                r.height
+            );
+        }
+    }
     let cam = Camera::look_at(eye, at, a.up, a.fov, w, h);
     let mut settings = RenderSettings::new(cam);
     settings.light = a.light;
     settings.spp = a.spp;
+    settings.shader = shader;
+    settings.light_samples = a.light_samples;
+    settings.max_depth = a.max_depth;
+    settings.ao_radius = a.ao_radius;
+    settings.aovs = aovs;
     let pool = pool(a.threads)?;
     let t = Instant::now();
+    let mut renderer = Renderer::new(settings, &b);
+    if let Some(mut map) = map {
+        map.rotate = a.env_rotate.to_radians();
+        map.scale = a.env_scale;
+        renderer = renderer.with_environment(Arc::new(Environment::new(map, a.env_lights, a.light_subsets)));
+    }
+    let setup = t.elapsed().as_secs_f64();
+    let stop = Stop { frames: a.frames, time: a.time.map(Duration::from_secs_f64) };
     let tracer = Tracer::new(&scene);
-    let img = pool.install(|| render_image(&tracer, &settings));
+    bars.stage("frames", stop.frames.filter(|_| stop.time.is_none()).unwrap_or(0) as u64);
+    let t = Instant::now();
+    let acc = pool.install(|| {
+        render_progressive(&renderer, &tracer, stop, |acc| {
+            bars.inc(1);
+            let err = acc.error().map(|e| format!("error ~{:.2}%", 100.0 * e)).unwrap_or_default();
+            bars.message(&format!("frame {} {err}", acc.frames()));
+            if let Some(r) = &reference {
+                let rmse = acc.image().relative_rmse(r);
+                eprintln!(
+                    "frame {} t {:.3} s rmse {:.3}% error_estimate {}",
+                    acc.frames(),
+                    t.elapsed().as_secs_f64(),
+                    100.0 * rmse,
+                    acc.error().map(|e| format!("{:.3}%", 100.0 * e)).unwrap_or_else(|| "-".into())
+                );
+            }
+        })
+    });
     let secs = t.elapsed().as_secs_f64();
+    bars.finish();
     if let Some(e) = scene.first_error() {
         return Err(e.into());
     }
-    img.save_png(&a.out)?;
-    eprintln!("rendered {} ({w}x{h}, {} spp) in {:.2} s", a.out.display(), a.spp, secs);
+    let img = acc.image();
+    if exr {
+        let mut l = acc.aovs();
+        if !aov_depth {
+            l.depth = None;
+        }
+        if !aov_normal {
+            l.normal = None;
+        }
+        if !aov_albedo {
+            l.albedo = None;
+        }
+        img.save_exr(&a.out, Some(&l))?;
+    } else {
+        img.save_png_with(&a.out, &ToneMap { exposure: a.exposure, curve })?;
+    }
+    let frames = acc.frames();
+    let mrays = acc.rays() as f64 / secs / 1e6;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({
+                "out": a.out, "width": w, "height": h, "spp": a.spp, "shader": shader.name(),
+                "frames": frames, "seconds": secs, "setup_seconds": setup, "fps": frames as f64 / secs,
+                "rays": acc.rays(), "mrays_s": mrays, "error_estimate": acc.error(),
+                "light_samples": a.light_samples, "env_lights": a.env_lights, "light_subsets": a.light_subsets,
+                "threads": pool.current_num_threads(),
+            })
+        );
+    } else {
+        eprintln!(
+            "rendered {} ({w}x{h}, {} spp, shader {}, {frames} frame{}) in {secs:.2} s: {:.2} frames/s, {mrays:.2} Mrays/s{}",
+            a.out.display(),
+            a.spp,
+            shader.name(),
+            if frames == 1 { "" } else { "s" },
+            frames as f64 / secs,
+            acc.error().map(|e| format!(", error estimate {:.2}%", 100.0 * e)).unwrap_or_default()
+        );
+    }
     Ok(())
 }
 
@@ -336,9 +584,15 @@ pub struct DemoArgs {
     /// Image size.
     #[arg(long, value_name = "WxH", default_value = "1280x960", value_parser = parse_res)]
     res: (u32, u32),
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 4)]
-    spp: u32,
+    /// Frames accumulated (1 primary sample and --light-samples shadow rays per pixel each).
+    #[arg(long, default_value_t = 8)]
+    frames: u32,
+    /// Shadow rays per hit toward the sky's virtual lights.
+    #[arg(long, value_name = "K", default_value_t = 2)]
+    light_samples: u32,
+    /// The procedural sky (see `megaray gen --help`).
+    #[arg(long, value_name = "SPEC", default_value = "sky:sun_elev=35,sun_azim=120,turbidity=3")]
+    sky: String,
 }
 
 fn cache_dir(given: Option<PathBuf>) -> PathBuf {
@@ -351,7 +605,7 @@ fn cache_dir(given: Option<PathBuf>) -> PathBuf {
     })
 }
 
-pub fn demo(a: DemoArgs, bars: &dyn Progress) -> Result<()> {
+pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     let dir = cache_dir(a.cache);
     std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create cache folder", dir.display()))?;
     let spec: GenSpec = format!("plant:{}", a.tris).parse()?;
@@ -381,23 +635,18 @@ pub fn demo(a: DemoArgs, bars: &dyn Progress) -> Result<()> {
         )?;
     }
     let png = dir.join("demo.png");
-    eprintln!("3/3 image: rendering {}x{} at {} spp", a.res.0, a.res.1, a.spp);
-    render(
-        RenderArgs {
-            scene: mray,
-            out: png.clone(),
-            res: a.res,
-            eye: None,
-            at: None,
-            up: Vec3::Y,
-            fov: 60.0,
-            cam_offset: Some(Vec3::new(0.35, 0.25, 0.45)),
-            light: Vec3::new(0.5, 1.0, 0.8),
-            spp: a.spp,
-            threads: None,
-        },
-        bars,
-    )?;
+    eprintln!(
+        "3/3 image: {}x{} under the procedural sky ({}), env shader, {} frames of 1 primary + {} light samples per pixel",
+        a.res.0, a.res.1, a.sky, a.frames, a.light_samples
+    );
+    let mut r = RenderArgs::new(mray, png.clone());
+    r.res = a.res;
+    r.cam_offset = Some(Vec3::new(0.35, 0.25, 0.45));
+    r.shader = "env".into();
+    r.sky = Some(a.sky);
+    r.frames = Some(a.frames.max(1));
+    r.light_samples = a.light_samples;
+    render(r, bars)?;
     println!("{}", png.display());
     Ok(())
 }

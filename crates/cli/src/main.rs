@@ -31,8 +31,18 @@ enum Command {
     ///   grid:N              height field, 2*N*N triangles (as the Embree peer harness)
     ///   sphereflake:L[:S]   Haines sphere flake, L levels, S bands (as the peer harness)
     ///   plant:T             a CAD-like power plant of about T triangles (k/M/G suffixes)
+    ///   sky[:KEY=V,...]     a procedural sky and sun as a lat-long .hdr (or .exr) environment
+    ///                       map, for --env. Keys (defaults):
+    ///                         sun_elev   sun elevation, degrees (35)
+    ///                         sun_azim   sun azimuth, degrees from +X toward +Z (120)
+    ///                         turbidity  haze, 1.7 clear .. 10 hazy (3)
+    ///                         sun        the sun disk's irradiance on a surface facing it (3)
+    ///                         sun_size   the sun disk's angular diameter, degrees (2)
+    ///                         width      map width in pixels, height is half (512)
     ///
-    /// Example: megaray gen plant:10M -o plant.ply
+    /// Examples:
+    ///   megaray gen plant:10M -o plant.ply
+    ///   megaray gen sky:sun_elev=20,sun_azim=60,turbidity=4 -o sky.hdr
     #[command(verbatim_doc_comment)]
     Gen(cmd::GenArgs),
     /// Build model files into one .mray scene file, out of core, in bounded memory.
@@ -42,10 +52,22 @@ enum Command {
     ///
     /// Example: megaray build plant.ply -o plant.mray --build-mem 1G
     Build(cmd::BuildArgs),
-    /// Render a scene file to a PNG: Lambertian shading, one light, hard shadows.
+    /// Render a scene file to a PNG or OpenEXR image, progressively
     ///
-    /// Example: megaray render plant.mray -o plant.png --res 1920x1080 --spp 4
-    Render(cmd::RenderArgs),
+    /// Shaders (--shader): normal, diffuse (lights, shadows), phong (highlights), mirror and
+    /// glass (recursive, --max-depth), ao (ambient occlusion), env (diffuse under the
+    /// environment), auto (by material; the default). Lights: the directional --light, or an
+    /// environment (--env map or --sky procedural sky) turned into --env-lights virtual
+    /// directional lights, split into --light-subsets subsets over 4x4 pixel tiles
+    /// (interleaved sampling), --light-samples shadow rays per hit. --frames / --time
+    /// accumulate frames progressively (new sample positions each).
+    ///
+    /// Examples:
+    ///   megaray render plant.mray -o plant.png --res 1920x1080 --spp 4
+    ///   megaray render plant.mray -o plant.png --sky sky:sun_elev=30 --shader env --frames 16
+    ///   megaray render plant.mray -o plant.exr --env sky.hdr --env-rotate 90 --time 10 --aov depth,normal,albedo
+    #[command(verbatim_doc_comment)]
+    Render(Box<cmd::RenderArgs>),
     /// Describe a scene file: triangles, bounds, parts, tree depths, tiles, bytes per triangle.
     Info(cmd::InfoArgs),
     /// Generate a power plant, build it out of core, render it: the whole pipeline.
@@ -87,7 +109,7 @@ fn main() {
     let res = match cli.cmd {
         Command::Gen(a) => cmd::gen(a, &bars),
         Command::Build(a) => cmd::build(a, &bars),
-        Command::Render(a) => cmd::render(a, &bars),
+        Command::Render(a) => cmd::render(*a, &bars),
         Command::Info(a) => cmd::info(a),
         Command::Demo(a) => cmd::demo(a, &bars),
         Command::Bench(a) => bench::bench(a, &bars),

@@ -18,6 +18,15 @@ impl Bars {
     }
 }
 
+impl Bars {
+    /// Replaces the current bar's message (e.g. the frame count and error estimate).
+    pub fn message(&self, msg: &str) {
+        if let Some(b) = self.bar.lock().unwrap().as_ref() {
+            b.set_message(msg.to_string());
+        }
+    }
+}
+
 impl Progress for Bars {
     fn stage(&self, what: &str, total: u64) {
         if !self.enabled {

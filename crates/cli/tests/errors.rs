@@ -173,3 +173,41 @@ fn random_byte_flips_never_panic() {
     }
     assert!(open_errors >= 10 && tile_errors >= 50, "{open_errors} open errors, {tile_errors} tile errors");
 }
+
+/// Bad lighting and output options: environment maps, shader names, sky specs, AOVs.
+#[test]
+fn bad_lighting_inputs_fail_cleanly() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = small_scene(dir.path());
+    let s = scene.to_str().unwrap();
+    let out = dir.path().join("o.png");
+    let o = out.to_str().unwrap();
+    let sky = dir.path().join("sky.hdr");
+    let (code, _, err) = run(&["gen", "sky:width=64", "-o", sky.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let bytes = std::fs::read(&sky).unwrap();
+    let write = |name: &str, b: &[u8]| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, b).unwrap();
+        p.to_str().unwrap().to_string()
+    };
+    let p = write("truncated.hdr", &bytes[..bytes.len() / 2]);
+    fails(&["render", s, "-o", o, "--env", &p], &["truncated.hdr", "environment map"]);
+    let p = write("garbage.hdr", b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 9999999 +X 9999999\n");
+    fails(&["render", s, "-o", o, "--env", &p], &["garbage.hdr", "environment map"]);
+    let p = write("notexr.exr", b"this is not an exr file at all");
+    fails(&["render", s, "-o", o, "--env", &p], &["notexr.exr", "environment map"]);
+    let p = write("image.hdr", b"\x89PNG\r\n\x1a\n");
+    fails(&["render", s, "-o", o, "--env", &p], &["image.hdr"]);
+    fails(&["render", s, "-o", o, "--env", "/nonexistent/sky.hdr"], &["sky.hdr"]);
+    fails(&["render", s, "-o", o, "--shader", "plastic"], &["--shader", "plastic", "known"]);
+    fails(&["render", s, "-o", o, "--sky", "sky:sun_elev=abc"], &["--sky", "sun_elev"]);
+    fails(&["render", s, "-o", o, "--aov", "depth"], &["--aov", ".exr"]);
+    fails(&["render", s, "-o", "x.exr", "--aov", "speed"], &["--aov", "speed"]);
+    fails(&["render", s, "-o", "x.tif"], &["x.tif", ".png or .exr"]);
+    fails(&["render", s, "-o", o, "--frames", "0"], &["--frames"]);
+    fails(&["render", s, "-o", o, "--tonemap", "filmic"], &["--tonemap", "filmic"]);
+    fails(&["gen", "sky:turbidity=0", "-o", sky.to_str().unwrap()], &["turbidity"]);
+    fails(&["gen", "sky:width=64", "-o", "/nonexistent-dir/sky.hdr"], &["sky.hdr", "cannot write"]);
+    assert!(!out.exists(), "no image is written after a bad option");
+}

@@ -1,0 +1,179 @@
+//! Progressive rendering: successive frames (new sample positions and light subsets each)
+//! summed into a float buffer, with an estimate of the remaining error.
+//!
+//! An interactive viewer drives it: [`Accumulator::reset`] when the camera moves, then
+//! `acc.add_frame(&render_frame(&renderer, &tracer, acc.frames()))` while it stands still,
+//! showing [`Accumulator::image`] after each. [`render_progressive`] does that loop until a
+//! frame count or a time is reached.
+
+use std::time::{Duration, Instant};
+
+use megaray_trace::Tracer;
+
+use crate::env::luminance;
+use crate::frame::{render_frame, Frame, Renderer};
+use crate::image_out::{Aovs, Image};
+
+/// Running sums of frames: per pixel the colour sum and the sum of squared luminance (for
+/// the error estimate), and the AOV sums.
+#[derive(Clone, Debug)]
+pub struct Accumulator {
+    width: u32,
+    height: u32,
+    frames: u32,
+    sum: Vec<[f64; 3]>,
+    lum_sq: Vec<f64>,
+    depth: Vec<f32>,
+    normal: Vec<[f32; 3]>,
+    albedo: Vec<[f32; 3]>,
+    rays: u64,
+}
+
+impl Accumulator {
+    /// An empty accumulator for `width` x `height` frames.
+    pub fn new(width: u32, height: u32) -> Accumulator {
+        let n = (width * height) as usize;
+        Accumulator {
+            width,
+            height,
+            frames: 0,
+            sum: vec![[0.0; 3]; n],
+            lum_sq: vec![0.0; n],
+            depth: Vec::new(),
+            normal: Vec::new(),
+            albedo: Vec::new(),
+            rays: 0,
+        }
+    }
+
+    /// Forgets every frame (the camera moved).
+    pub fn reset(&mut self) {
+        *self = Accumulator::new(self.width, self.height);
+    }
+
+    /// Frames added since the last reset.
+    pub fn frames(&self) -> u32 {
+        self.frames
+    }
+
+    /// Rays fired by the frames added.
+    pub fn rays(&self) -> u64 {
+        self.rays
+    }
+
+    /// Adds one frame (of this accumulator's size).
+    pub fn add_frame(&mut self, f: &Frame) {
+        assert_eq!(
+            (f.image.width, f.image.height),
+            (self.width, self.height),
+            "frame size differs from the accumulator's"
+        );
+        for ((s, q), p) in self.sum.iter_mut().zip(&mut self.lum_sq).zip(&f.image.pixels) {
+            for k in 0..3 {
+                s[k] += p[k] as f64;
+            }
+            let l = luminance((*p).into()) as f64;
+            *q += l * l;
+        }
+        if !f.depth.is_empty() {
+            if self.frames == 0 || self.depth.is_empty() {
+                self.depth = f.depth.clone();
+                self.normal = vec![[0.0; 3]; f.normal.len()];
+                self.albedo = vec![[0.0; 3]; f.albedo.len()];
+            }
+            for (d, e) in self.depth.iter_mut().zip(&f.depth) {
+                *d = d.min(*e);
+            }
+            for (a, b) in self.normal.iter_mut().zip(&f.normal).chain(self.albedo.iter_mut().zip(&f.albedo)) {
+                for k in 0..3 {
+                    a[k] += b[k];
+                }
+            }
+        }
+        self.frames += 1;
+        self.rays += f.rays;
+    }
+
+    /// The mean of the frames added (black before the first).
+    pub fn image(&self) -> Image {
+        let inv = 1.0 / self.frames.max(1) as f64;
+        Image {
+            width: self.width,
+            height: self.height,
+            pixels: self.sum.iter().map(|s| s.map(|c| (c * inv) as f32)).collect(),
+        }
+    }
+
+    /// The AOVs: depth the nearest over the frames, normal (renormalised) and albedo the
+    /// mean. Empty when the frames had none.
+    pub fn aovs(&self) -> Aovs {
+        if self.depth.is_empty() {
+            return Aovs::default();
+        }
+        let inv = 1.0 / self.frames.max(1) as f32;
+        Aovs {
+            depth: Some(self.depth.clone()),
+            normal: Some(
+                self.normal.iter().map(|n| megaray_base::Vec3::from(*n).normalize_or_zero().to_array()).collect(),
+            ),
+            albedo: Some(self.albedo.iter().map(|a| a.map(|c| c * inv)).collect()),
+        }
+    }
+
+    /// The estimated relative error of the mean image: the root mean square, over pixels, of
+    /// the standard error of each pixel's mean luminance (from the spread of its frames),
+    /// divided by the image's mean luminance. `None` before the second frame. It falls as
+    /// 1 / sqrt(frames) for independent frames.
+    pub fn error(&self) -> Option<f64> {
+        let n = self.frames as f64;
+        if self.frames < 2 {
+            return None;
+        }
+        let mut var_sum = 0.0;
+        let mut lum_sum = 0.0;
+        for (s, q) in self.sum.iter().zip(&self.lum_sq) {
+            let mean = luminance(megaray_base::Vec3::new(s[0] as f32, s[1] as f32, s[2] as f32)) as f64 / n;
+            let var = ((q / n - mean * mean) * n / (n - 1.0)).max(0.0);
+            var_sum += var / n;
+            lum_sum += mean;
+        }
+        let pixels = self.sum.len().max(1) as f64;
+        let mean_lum = lum_sum / pixels;
+        Some(if mean_lum > 0.0 { (var_sum / pixels).sqrt() / mean_lum } else { 0.0 })
+    }
+}
+
+/// When [`render_progressive`] stops: after `frames` frames, or once `time` has passed
+/// (checked after each frame; at least one frame is always rendered), whichever comes first.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Stop {
+    pub frames: Option<u32>,
+    pub time: Option<Duration>,
+}
+
+/// Renders frames 0, 1, 2, ... into an accumulator until `stop`, calling `on_frame` after
+/// each (for progress bars and previews).
+pub fn render_progressive(
+    r: &Renderer,
+    tracer: &Tracer,
+    stop: Stop,
+    mut on_frame: impl FnMut(&Accumulator),
+) -> Accumulator {
+    let (w, h) = (r.settings.camera.width, r.settings.camera.height);
+    let mut acc = Accumulator::new(w, h);
+    let start = Instant::now();
+    let max_frames = match (stop.frames, stop.time) {
+        (Some(n), _) => n.max(1),
+        (None, Some(_)) => u32::MAX,
+        (None, None) => 1,
+    };
+    while acc.frames() < max_frames {
+        let f = render_frame(r, tracer, acc.frames());
+        acc.add_frame(&f);
+        on_frame(&acc);
+        if stop.time.is_some_and(|t| start.elapsed() >= t) {
+            break;
+        }
+    }
+    acc
+}

@@ -1,0 +1,284 @@
+//! The renderer and the frame loop.
+//!
+//! [`Renderer::sample`] is the whole work of one sample: the camera ray, the shader at its
+//! hit (with whatever rays it fires), the AOVs. It is a pure function of (pixel, sample
+//! index) and the rays' answers, and returns [`Suspended`] if any ray was, so a paging frame
+//! loop can park the sample and run it again later. [`render_frame`] is the in-core loop:
+//! 32x32 pixel tiles over rayon's threads, each pixel `spp` samples, with a plain [`Tracer`]
+//! that never suspends.
+
+use std::sync::Arc;
+
+use megaray_base::{Aabb, Vec3};
+use megaray_trace::{RayCaster, Suspended, Tracer};
+use rayon::prelude::*;
+
+use crate::camera::Camera;
+use crate::env::Environment;
+use crate::image_out::Image;
+use crate::material::TextureCache;
+use crate::sampling::{light_subset, pixel_offset, Sampler};
+use crate::shader::{ShadeCtx, Shader, SurfaceHit};
+use crate::shaders::Builtin;
+
+/// The direction toward the benchmark light, normalize(0.5, 1, 0.8).
+pub fn default_light() -> Vec3 {
+    Vec3::new(0.5, 1.0, 0.8).normalize()
+}
+
+/// How to render.
+#[derive(Clone, Debug)]
+pub struct RenderSettings {
+    pub camera: Camera,
+    /// Direction toward the directional light (normalised where used). It lights the
+    /// `diffuse` and `phong` shaders when there is no environment.
+    pub light: Vec3,
+    /// Samples per pixel per frame: sample `i` of a pixel sits at [`pixel_offset`]`(i)`, so 1
+    /// sample is the pixel centre in the first frame.
+    pub spp: u32,
+    /// Radiance of the sky where rays miss, when there is no environment map; also the
+    /// constant environment of the `env` shader then.
+    pub sky: [f32; 3],
+    /// Light reaching surfaces that the directional light does not (a constant ambient
+    /// term; not used under an environment).
+    pub ambient: f32,
+    /// Offset of secondary-ray origins along the normal, as a fraction of the scene diagonal.
+    pub eps_scale: f32,
+    /// The built-in shader (a custom one is set with [`Renderer::with_shader`]).
+    pub shader: Builtin,
+    /// Shadow rays per hit toward the environment's lights (0: every light of the subset);
+    /// rays per hit for ambient occlusion.
+    pub light_samples: u32,
+    /// Nesting limit of [`ShadeCtx::trace`] (mirror and glass bounces).
+    pub max_depth: u32,
+    /// Ambient occlusion distance, as a fraction of the scene diagonal.
+    pub ao_radius: f32,
+    /// Whether samples compute the AOVs (depth, normal, albedo).
+    pub aovs: bool,
+}
+
+impl RenderSettings {
+    pub fn new(camera: Camera) -> RenderSettings {
+        RenderSettings {
+            camera,
+            light: default_light(),
+            spp: 1,
+            sky: [0.55, 0.7, 0.9],
+            ambient: 0.12,
+            eps_scale: 1e-4,
+            shader: Builtin::Diffuse,
+            light_samples: 2,
+            max_depth: 6,
+            ao_radius: 0.05,
+            aovs: false,
+        }
+    }
+}
+
+/// What one sample (or the average of a pixel's samples) yields.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SampleOut {
+    /// Radiance along the camera ray (linear RGB).
+    pub radiance: Vec3,
+    /// Distance to the primary hit (`f32::INFINITY` on a miss). Only with `settings.aovs`.
+    pub depth: f32,
+    /// Shading normal at the primary hit (zero on a miss). Only with `settings.aovs`.
+    pub normal: Vec3,
+    /// Albedo at the primary hit (zero on a miss). Only with `settings.aovs`.
+    pub albedo: Vec3,
+    /// Rays fired (camera ray included).
+    pub rays: u32,
+}
+
+/// Everything needed to shade samples: settings, shader, environment, texture cache. Shared
+/// by all threads.
+pub struct Renderer {
+    pub settings: RenderSettings,
+    shader: Arc<dyn Shader>,
+    env: Arc<Environment>,
+    has_env: bool,
+    eps: f32,
+    diagonal: f32,
+    textures: TextureCache,
+}
+
+impl Renderer {
+    /// A renderer for a scene with bounds `bounds`, shading with `settings.shader`, with the
+    /// constant sky `settings.sky` as its (implicit) environment.
+    pub fn new(settings: RenderSettings, bounds: &Aabb) -> Renderer {
+        let env = Environment::constant(settings.sky, Environment::DEFAULT_LIGHTS, Environment::DEFAULT_SUBSETS);
+        let diagonal = bounds.diagonal();
+        Renderer {
+            shader: Arc::new(settings.shader),
+            eps: settings.eps_scale * diagonal,
+            env: Arc::new(env),
+            has_env: false,
+            diagonal,
+            textures: TextureCache::default(),
+            settings,
+        }
+    }
+
+    /// Lights the scene with `env` (what misses see, and the lights of every shader).
+    pub fn with_environment(mut self, env: Arc<Environment>) -> Renderer {
+        self.env = env;
+        self.has_env = true;
+        self
+    }
+
+    /// Shades with `shader` instead of `settings.shader`.
+    pub fn with_shader(mut self, shader: Arc<dyn Shader>) -> Renderer {
+        self.shader = shader;
+        self
+    }
+
+    /// The shader.
+    pub fn shader(&self) -> &dyn Shader {
+        &*self.shader
+    }
+
+    /// The environment (the constant sky when none was given).
+    pub fn environment(&self) -> &Environment {
+        &self.env
+    }
+
+    /// Whether an environment was given ([`Renderer::with_environment`]).
+    pub fn has_environment(&self) -> bool {
+        self.has_env
+    }
+
+    /// What a ray in direction `dir` sees when it misses everything.
+    pub fn background(&self, dir: Vec3) -> Vec3 {
+        if self.has_env {
+            self.env.map.eval(dir.normalize_or_zero())
+        } else {
+            Vec3::from(self.settings.sky)
+        }
+    }
+
+    /// Secondary-ray offset (world units).
+    pub fn eps(&self) -> f32 {
+        self.eps
+    }
+
+    /// Length of the scene's bounding-box diagonal.
+    pub fn diagonal(&self) -> f32 {
+        self.diagonal
+    }
+
+    pub(crate) fn textures(&self) -> &TextureCache {
+        &self.textures
+    }
+
+    /// One sample: sample `sample_index` of pixel (`px`, `py`). Deterministic: the same
+    /// arguments fire the same rays. Returns [`Suspended`] if the caster did.
+    pub fn sample(
+        &self,
+        px: u32,
+        py: u32,
+        sample_index: u32,
+        caster: &mut dyn RayCaster,
+    ) -> Result<SampleOut, Suspended> {
+        let (ox, oy) = pixel_offset(sample_index);
+        let ray = self.settings.camera.ray(px as f32 + ox, py as f32 + oy);
+        let subset = light_subset(px, py, sample_index, self.env.lights.subsets());
+        let mut ctx = ShadeCtx::new(self, caster, Sampler::new(px, py, sample_index), subset);
+        let mut out = SampleOut { depth: f32::INFINITY, ..SampleOut::default() };
+        match ctx.intersect(&ray)? {
+            None => out.radiance = self.background(ray.dir),
+            Some(hit) => {
+                let sh = SurfaceHit::new(ctx.scene(), &ray, hit);
+                if self.settings.aovs {
+                    out.depth = hit.t;
+                    out.normal = sh.ns;
+                    out.albedo = ctx.material(&sh).albedo;
+                }
+                out.radiance = self.shader.shade(&ray, &sh, &mut ctx)?;
+            }
+        }
+        out.rays = ctx.rays();
+        Ok(out)
+    }
+
+    /// The `spp` samples of pixel (`px`, `py`) in frame `frame` (sample indices
+    /// `frame * spp .. (frame + 1) * spp`), averaged. Depth is the nearest of the samples'.
+    pub fn pixel(&self, px: u32, py: u32, frame: u32, caster: &mut dyn RayCaster) -> Result<SampleOut, Suspended> {
+        let spp = self.settings.spp.max(1);
+        let mut acc = SampleOut { depth: f32::INFINITY, ..SampleOut::default() };
+        for k in 0..spp {
+            let s = self.sample(px, py, frame.wrapping_mul(spp).wrapping_add(k), caster)?;
+            acc.radiance += s.radiance;
+            acc.normal += s.normal;
+            acc.albedo += s.albedo;
+            acc.depth = acc.depth.min(s.depth);
+            acc.rays += s.rays;
+        }
+        let inv = 1.0 / spp as f32;
+        acc.radiance *= inv;
+        acc.albedo *= inv;
+        acc.normal = acc.normal.normalize_or_zero();
+        Ok(acc)
+    }
+}
+
+/// One rendered frame: the image and (with `settings.aovs`) the AOVs.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub image: Image,
+    /// Per pixel; empty without `settings.aovs`.
+    pub depth: Vec<f32>,
+    pub normal: Vec<[f32; 3]>,
+    pub albedo: Vec<[f32; 3]>,
+    /// Rays fired in the frame.
+    pub rays: u64,
+}
+
+/// The tile edge of the frame loop, in pixels.
+pub const TILE: u32 = 32;
+
+/// Renders frame `frame` (sample positions and light subsets move on from frame to frame):
+/// 32x32 tiles over the current rayon pool, [`Renderer::pixel`] for each pixel.
+pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
+    let (w, h) = (r.settings.camera.width, r.settings.camera.height);
+    let tiles_x = w.div_ceil(TILE);
+    let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
+    let results: Vec<Vec<SampleOut>> = tiles
+        .par_iter()
+        .map(|&(tx, ty)| {
+            let mut caster = tracer;
+            let mut out = Vec::with_capacity((TILE * TILE) as usize);
+            for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                    out.push(r.pixel(x, y, frame, &mut caster).expect("a plain in-core Tracer never suspends"));
+                }
+            }
+            out
+        })
+        .collect();
+    let n = (w * h) as usize;
+    let aovs = r.settings.aovs;
+    let mut f = Frame {
+        image: Image::new(w, h),
+        depth: if aovs { vec![0.0; n] } else { Vec::new() },
+        normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
+        albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
+        rays: 0,
+    };
+    for ((tx, ty), px) in tiles.iter().zip(results) {
+        let mut it = px.into_iter();
+        for y in ty * TILE..((ty + 1) * TILE).min(h) {
+            for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                let s = it.next().expect("tile pixel count");
+                let i = (y * w + x) as usize;
+                f.image.pixels[i] = s.radiance.to_array();
+                f.rays += s.rays as u64;
+                if aovs {
+                    f.depth[i] = s.depth;
+                    f.normal[i] = s.normal.to_array();
+                    f.albedo[i] = s.albedo.to_array();
+                }
+            }
+        }
+    }
+    f
+}

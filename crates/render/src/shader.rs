@@ -1,0 +1,251 @@
+//! The shader interface: what is called at each hit, and what it may do.
+//!
+//! A [`Shader`] gets the hit ([`SurfaceHit`]: the tracer's [`Hit`] plus position and
+//! normals) and a [`ShadeCtx`] through which it fires rays (closest hit
+//! [`ShadeCtx::intersect`], any hit [`ShadeCtx::occluded`], or [`ShadeCtx::trace`], which
+//! shades the next hit recursively up to the depth limit), reads the surface's
+//! [`Material`] (only when it asks: attributes stay out of traversal's way), draws its random
+//! numbers and sums the lights ([`ShadeCtx::direct`]). Every ray goes through
+//! [`megaray_trace::RayCaster`], so a paging tracer may answer [`Suspended`]: shaders pass it
+//! on with `?`, and, since all their random numbers come from the (pixel, sample index)
+//! sampler, the re-run sample fires the same rays.
+//!
+//! ```
+//! use megaray_base::{Ray, Vec3};
+//! use megaray_render::{ShadeCtx, Shader, SurfaceHit};
+//! use megaray_trace::Suspended;
+//!
+//! /// Red where the light is seen, blue in shadow.
+//! struct RedBlue;
+//! impl Shader for RedBlue {
+//!     fn shade(&self, _ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
+//!         let shadow = ctx.spawn(hit, ctx.renderer().settings.light.normalize());
+//!         Ok(if ctx.occluded(&shadow)? { Vec3::Z } else { Vec3::X })
+//!     }
+//! }
+//! ```
+
+use megaray_base::{Ray, Vec3};
+use megaray_scene::Scene;
+use megaray_trace::{Hit, RayCaster, Suspended};
+
+use crate::env::DirLight;
+use crate::frame::Renderer;
+use crate::material::{material_at, Material};
+use crate::sampling::Sampler;
+
+/// Called when a ray hits a surface; returns the radiance leaving the hit toward the ray's
+/// origin. Implementations must be deterministic given the context's sampler (no other
+/// source of randomness), and pass [`Suspended`] on.
+pub trait Shader: Send + Sync {
+    fn shade(&self, ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended>;
+}
+
+/// A hit, with what nearly every shader needs computed: the point, the geometric and the
+/// shading normal, both unit length and on the side the ray came from.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceHit {
+    pub hit: Hit,
+    /// The hit point.
+    pub p: Vec3,
+    /// Unit geometric normal, facing the ray's origin.
+    pub ng: Vec3,
+    /// Unit shading normal (interpolated vertex normals where the scene has them, else
+    /// `ng`), on the same side as `ng`.
+    pub ns: Vec3,
+    /// Whether the ray hit the side the triangle's winding faces (counter-clockwise front),
+    /// i.e. it enters a closed, outward-wound mesh.
+    pub front: bool,
+    /// Unit direction back toward the ray's origin.
+    pub wo: Vec3,
+}
+
+impl SurfaceHit {
+    /// Computes the point and normals of `hit` on `ray` (reads the vertex normals of the
+    /// hit triangle, if the scene has them).
+    pub fn new(scene: &Scene, ray: &Ray, hit: Hit) -> SurfaceHit {
+        let raw = hit.geometric_normal().normalize_or_zero();
+        let front = raw.dot(ray.dir) < 0.0;
+        let ng = if front { raw } else { -raw };
+        let mut ns = ng;
+        if let Some(n) = scene.normals(hit.part, hit.prim) {
+            let w = 1.0 - hit.u - hit.v;
+            let n = (Vec3::from(n[0]) * w + Vec3::from(n[1]) * hit.u + Vec3::from(n[2]) * hit.v).normalize_or_zero();
+            if n != Vec3::ZERO {
+                ns = if n.dot(ng) < 0.0 { -n } else { n };
+            }
+        }
+        SurfaceHit { p: ray.org + ray.dir * hit.t, ng, ns, front, wo: -ray.dir.normalize_or_zero(), hit }
+    }
+}
+
+/// What a shader may use: rays, the renderer's lights and settings, random numbers.
+pub struct ShadeCtx<'a> {
+    renderer: &'a Renderer,
+    caster: &'a mut dyn RayCaster,
+    sampler: Sampler,
+    subset: u32,
+    depth: u32,
+    rays: u32,
+}
+
+impl<'a> ShadeCtx<'a> {
+    /// A context for one sample: `subset` is its light subset (interleaved sampling).
+    pub fn new(renderer: &'a Renderer, caster: &'a mut dyn RayCaster, sampler: Sampler, subset: u32) -> Self {
+        ShadeCtx { renderer, caster, sampler, subset, depth: 0, rays: 0 }
+    }
+
+    /// The renderer (settings, environment).
+    pub fn renderer(&self) -> &'a Renderer {
+        self.renderer
+    }
+
+    /// The scene the rays are traced in.
+    pub fn scene(&self) -> &Scene {
+        self.caster.scene()
+    }
+
+    /// The closest hit of `ray`.
+    pub fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended> {
+        self.rays += 1;
+        self.caster.intersect(ray)
+    }
+
+    /// Whether anything lies on `ray` (any hit, for shadows).
+    pub fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended> {
+        self.rays += 1;
+        self.caster.occluded(ray)
+    }
+
+    /// Rays fired so far.
+    pub fn rays(&self) -> u32 {
+        self.rays
+    }
+
+    /// How many shaders deep this context is (0 at the camera ray's hit).
+    pub fn depth(&self) -> u32 {
+        self.depth
+    }
+
+    /// The radiance arriving along `ray`: its closest hit shaded by the renderer's shader, or
+    /// the environment where it misses. Beyond `max_depth` nested calls it returns black.
+    pub fn trace(&mut self, ray: &Ray) -> Result<Vec3, Suspended> {
+        if self.depth >= self.renderer.settings.max_depth {
+            return Ok(Vec3::ZERO);
+        }
+        let Some(hit) = self.intersect(ray)? else { return Ok(self.background(ray.dir)) };
+        let sh = SurfaceHit::new(self.scene(), ray, hit);
+        let renderer = self.renderer;
+        self.depth += 1;
+        let c = renderer.shader().shade(ray, &sh, self);
+        self.depth -= 1;
+        c
+    }
+
+    /// What a ray leaving in direction `dir` sees when it hits nothing.
+    pub fn background(&self, dir: Vec3) -> Vec3 {
+        self.renderer.background(dir)
+    }
+
+    /// The surface's material (reads its attributes now).
+    pub fn material(&self, hit: &SurfaceHit) -> Material {
+        material_at(self.scene(), &hit.hit, self.renderer.textures())
+    }
+
+    /// A ray from `hit` in direction `dir`, its origin moved off the surface to the side
+    /// `dir` leaves on (by the renderer's epsilon).
+    pub fn spawn(&self, hit: &SurfaceHit, dir: Vec3) -> Ray {
+        let side = if dir.dot(hit.ng) >= 0.0 { hit.ng } else { -hit.ng };
+        Ray { org: hit.p + side * self.renderer.eps(), dir, t_min: 0.0, t_max: f32::INFINITY }
+    }
+
+    /// The next random number of this sample, in `[0, 1)`.
+    pub fn next_1d(&mut self) -> f32 {
+        self.sampler.next_1d()
+    }
+
+    /// The next pair of random numbers of this sample.
+    pub fn next_2d(&mut self) -> (f32, f32) {
+        self.sampler.next_2d()
+    }
+
+    /// Irradiance that reaches every point regardless of shadows: `pi * ambient` when the
+    /// renderer lights with its single directional light, 0 under an environment.
+    pub fn ambient(&self) -> f32 {
+        if self.renderer.has_environment() {
+            0.0
+        } else {
+            std::f32::consts::PI * self.renderer.settings.ambient
+        }
+    }
+
+    /// Direct light at `hit` from the renderer's lights, with shadows:
+    /// `sum over chosen lights of weight * brdf(light dir) * cos * visible`, an unbiased
+    /// estimate of the reflected radiance for the BRDF `brdf` (1/sr; `albedo / pi` for a
+    /// Lambertian surface).
+    ///
+    /// The lights are the environment's virtual lights when the renderer has one (see
+    /// [`ShadeCtx::env_direct`]), else the single directional light `settings.light` with
+    /// irradiance `pi * (1 - ambient)` (so that a white surface facing it shows
+    /// `1 - ambient`, plus the ambient term).
+    pub fn direct(&mut self, hit: &SurfaceHit, brdf: impl Fn(Vec3) -> Vec3) -> Result<Vec3, Suspended> {
+        if self.renderer.has_environment() {
+            return self.env_direct(hit, brdf);
+        }
+        let s = &self.renderer.settings;
+        let light =
+            DirLight { dir: s.light.normalize(), weight: Vec3::splat(std::f32::consts::PI * (1.0 - s.ambient)) };
+        self.light_contribution(hit, &light, 1.0, &brdf)
+    }
+
+    /// Direct light from the environment's virtual lights (the given environment, or the
+    /// constant sky colour), with interleaved sampling: this sample's subset, weights times
+    /// the number of subsets, and `light_samples` of the subset's lights chosen by stratified
+    /// sampling (each weighted by subset size / light_samples), or every light of the subset
+    /// when `light_samples` is 0 or at least the subset's size.
+    pub fn env_direct(&mut self, hit: &SurfaceHit, brdf: impl Fn(Vec3) -> Vec3) -> Result<Vec3, Suspended> {
+        let lights = &self.renderer.environment().lights;
+        let m = lights.subsets() as f32;
+        let subset = lights.subset(self.subset);
+        let n = subset.len();
+        if n == 0 {
+            return Ok(Vec3::ZERO);
+        }
+        let k = self.renderer.settings.light_samples as usize;
+        let mut sum = Vec3::ZERO;
+        if k == 0 || k >= n {
+            for l in subset {
+                sum += self.light_contribution(hit, l, m, &brdf)?;
+            }
+        } else {
+            let u = self.next_1d();
+            let scale = m * n as f32 / k as f32;
+            for j in 0..k {
+                let i = (((j as f32 + u) / k as f32 * n as f32) as usize).min(n - 1);
+                sum += self.light_contribution(hit, &subset[i], scale, &brdf)?;
+            }
+        }
+        Ok(sum)
+    }
+
+    fn light_contribution(
+        &mut self,
+        hit: &SurfaceHit,
+        l: &DirLight,
+        scale: f32,
+        brdf: &impl Fn(Vec3) -> Vec3,
+    ) -> Result<Vec3, Suspended> {
+        let cos = hit.ns.dot(l.dir);
+        if cos <= 0.0 || hit.ng.dot(l.dir) <= 0.0 {
+            return Ok(Vec3::ZERO);
+        }
+        let f = brdf(l.dir);
+        if f == Vec3::ZERO {
+            return Ok(Vec3::ZERO);
+        }
+        if self.occluded(&self.spawn(hit, l.dir))? {
+            return Ok(Vec3::ZERO);
+        }
+        Ok(l.weight * f * (cos * scale))
+    }
+}

@@ -1,0 +1,64 @@
+//! Progressive accumulation converges like Monte Carlo: the error against a high-frame
+//! reference falls roughly as 1 / sqrt(frames), and the accumulator's own estimate tracks it.
+
+mod common;
+
+use std::sync::Arc;
+
+use common::Obj;
+use megaray_base::Vec3;
+use megaray_render::*;
+use megaray_scene::Scene;
+use megaray_trace::Tracer;
+
+#[test]
+fn error_falls_as_one_over_sqrt_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut obj = Obj::default();
+    obj.quad([
+        Vec3::new(-4.0, 0.0, -4.0),
+        Vec3::new(-4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, -4.0),
+    ]);
+    obj.sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, 12, true);
+    obj.sphere(Vec3::new(1.8, 0.5, 1.0), 0.5, 8, false);
+    let path = obj.build(dir.path(), "balls", None);
+    let scene = Scene::open(&path).unwrap();
+    let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, 32, 32);
+    let mut s = RenderSettings::new(cam);
+    s.shader = Builtin::Env;
+    s.light_samples = 1;
+    let env = Environment::new(SkySpec { width: 64, ..SkySpec::default() }.map(), 1024, 16);
+    let r = Renderer::new(s, &scene.header().bounds).with_environment(Arc::new(env));
+    let tracer = Tracer::new(&scene);
+    let run = |frames| render_progressive(&r, &tracer, Stop { frames: Some(frames), time: None }, |_| {});
+    let reference = run(2048).image();
+    let mut acc = Accumulator::new(32, 32);
+    let mut rmse = Vec::new();
+    let mut estimate = Vec::new();
+    for f in 0..256 {
+        acc.add_frame(&render_frame(&r, &tracer, f));
+        if [4, 16, 64, 256].contains(&acc.frames()) {
+            rmse.push(acc.image().relative_rmse(&reference));
+            estimate.push(acc.error().unwrap());
+        }
+    }
+    // Each quadrupling of the frames should halve the error: allow 1.5 .. 3.5 (the
+    // low-discrepancy sequence and the interleaving cycle can do better than Monte Carlo).
+    for k in 0..3 {
+        let ratio = rmse[k] / rmse[k + 1];
+        assert!((1.5..=3.5).contains(&ratio), "rmse {rmse:?}: ratio {ratio} at step {k}");
+    }
+    // The estimate is of the right size (within a factor 3 of the true error) while the
+    // reference's own error is small.
+    for k in 0..3 {
+        let q = estimate[k] / rmse[k];
+        assert!((0.33..=3.0).contains(&q), "estimate {estimate:?} vs rmse {rmse:?}");
+    }
+    // Restarting gives the same frames again (deterministic samples).
+    acc.reset();
+    assert_eq!(acc.frames(), 0);
+    acc.add_frame(&render_frame(&r, &tracer, 0));
+    assert_eq!(acc.image(), run(1).image());
+}
