@@ -266,6 +266,17 @@ pub struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
+    #[command(flatten)]
+    paging: crate::paging::PagingArgs,
+    /// End each frame after MS milliseconds even if pixels wait for scene data (they are
+    /// left to the next frames; with one frame they stay black and are counted).
+    #[arg(long, value_name = "MS")]
+    deadline: Option<u64>,
+    /// A camera path instead of a still: N frames orbiting the point looked at (DEG degrees
+    /// in all, default 360), each rendered on its own; prints frame times and bytes read
+    /// (one JSON line per frame with --json); the image is the last frame.
+    #[arg(long, value_name = "N[:DEG]")]
+    orbit: Option<String>,
 }
 
 impl RenderArgs {
@@ -300,6 +311,9 @@ impl RenderArgs {
             reference: None,
             json: false,
             threads: None,
+            paging: Default::default(),
+            deadline: None,
+            orbit: None,
         }
     }
 }
@@ -311,6 +325,16 @@ fn is_exr(path: &Path) -> Result<bool> {
         Some("exr") => Ok(true),
         _ => bail!("{}: the output must end in .png or .exr", path.display()),
     }
+}
+
+/// Writes a still (no AOVs): EXR linear, PNG tone-mapped.
+fn save(img: &megaray_render::Image, out: &Path, exr: bool, exposure: f32, curve: ToneCurve) -> Result<()> {
+    if exr {
+        img.save_exr(out, None)?;
+    } else {
+        img.save_png_with(out, &ToneMap { exposure, curve })?;
+    }
+    Ok(())
 }
 
 pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
@@ -373,7 +397,8 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         Some(p) => Some(read_exr(p)?.0),
         None => None,
     };
-    let scene = Scene::open(&a.scene)?;
+    let scene = Arc::new(Scene::open(&a.scene)?);
+    let pager = a.paging.pager(&scene)?;
     let b = scene.header().bounds;
     let (w, h) = a.res;
     let at = a.at.unwrap_or(b.center());
@@ -400,6 +425,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     settings.max_depth = a.max_depth;
     settings.ao_radius = a.ao_radius;
     settings.aovs = aovs;
+    settings.frame_deadline = a.deadline.map(Duration::from_millis);
     let pool = pool(a.threads)?;
     let t = Instant::now();
     let mut renderer = Renderer::new(settings, &b);
@@ -410,7 +436,24 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     }
     let setup = t.elapsed().as_secs_f64();
     let stop = Stop { frames: a.frames, time: a.time.map(Duration::from_secs_f64) };
-    let tracer = Tracer::new(&scene);
+    let tracer = match &pager {
+        Some(p) => Tracer::paged(p),
+        None => Tracer::new(&scene),
+    };
+    if let Some(spec) = &a.orbit {
+        let o = crate::paging::parse_orbit(spec)?;
+        let (fov, up) = (a.fov, a.up);
+        let camera = |angle: f32| {
+            let (s, c) = angle.sin_cos();
+            let d = eye - at;
+            Camera::look_at(at + Vec3::new(c * d.x + s * d.z, d.y, -s * d.x + c * d.z), at, up, fov, w, h)
+        };
+        let img = crate::paging::orbit(o, renderer, camera, &tracer, &pool, a.json)?;
+        if let Some(e) = scene.first_error().or_else(|| pager.as_ref().and_then(|p| p.first_error())) {
+            return Err(e.into());
+        }
+        return save(&img, &a.out, exr, a.exposure, curve);
+    }
     bars.stage("frames", stop.frames.filter(|_| stop.time.is_none()).unwrap_or(0) as u64);
     let t = Instant::now();
     let acc = pool.install(|| {
@@ -432,7 +475,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     });
     let secs = t.elapsed().as_secs_f64();
     bars.finish();
-    if let Some(e) = scene.first_error() {
+    if let Some(e) = scene.first_error().or_else(|| pager.as_ref().and_then(|p| p.first_error())) {
         return Err(e.into());
     }
     let img = acc.image();
@@ -462,6 +505,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
                 "rays": acc.rays(), "mrays_s": mrays, "error_estimate": acc.error(),
                 "light_samples": a.light_samples, "env_lights": a.env_lights, "light_subsets": a.light_subsets,
                 "threads": pool.current_num_threads(),
+                "paging": crate::paging::stats_json(pager.as_ref(), &acc.jobs()),
             })
         );
     } else {
@@ -474,6 +518,12 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             frames as f64 / secs,
             acc.error().map(|e| format!(", error estimate {:.2}%", 100.0 * e)).unwrap_or_default()
         );
+        if acc.jobs().unfinished > 0 {
+            eprintln!("{} pixels not finished by the --deadline (left black)", acc.unfinished());
+        }
+        if a.paging.stats {
+            crate::paging::print_stats(pager.as_ref(), &acc.jobs());
+        }
     }
     Ok(())
 }

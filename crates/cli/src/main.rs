@@ -4,6 +4,7 @@
 
 mod bench;
 mod cmd;
+mod paging;
 mod progress;
 
 use clap::{Parser, Subcommand};

@@ -8,6 +8,7 @@
 
 use std::time::{Duration, Instant};
 
+use megaray_trace::jobs::JobStats;
 use megaray_trace::Tracer;
 
 use crate::env::luminance;
@@ -21,12 +22,15 @@ pub struct Accumulator {
     width: u32,
     height: u32,
     frames: u32,
+    /// Frames that finished each pixel (a frame with a deadline may leave some).
+    counts: Vec<u32>,
     sum: Vec<[f64; 3]>,
     lum_sq: Vec<f64>,
     depth: Vec<f32>,
     normal: Vec<[f32; 3]>,
     albedo: Vec<[f32; 3]>,
     rays: u64,
+    jobs: JobStats,
 }
 
 impl Accumulator {
@@ -37,12 +41,14 @@ impl Accumulator {
             width,
             height,
             frames: 0,
+            counts: vec![0; n],
             sum: vec![[0.0; 3]; n],
             lum_sq: vec![0.0; n],
             depth: Vec::new(),
             normal: Vec::new(),
             albedo: Vec::new(),
             rays: 0,
+            jobs: JobStats::default(),
         }
     }
 
@@ -61,14 +67,19 @@ impl Accumulator {
         self.rays
     }
 
-    /// Adds one frame (of this accumulator's size).
+    /// Adds one frame (of this accumulator's size). Pixels the frame did not finish
+    /// ([`Frame::done`]) are left out: each pixel is the mean of the frames that finished it.
     pub fn add_frame(&mut self, f: &Frame) {
         assert_eq!(
             (f.image.width, f.image.height),
             (self.width, self.height),
             "frame size differs from the accumulator's"
         );
-        for ((s, q), p) in self.sum.iter_mut().zip(&mut self.lum_sq).zip(&f.image.pixels) {
+        for (i, ((s, q), p)) in self.sum.iter_mut().zip(&mut self.lum_sq).zip(&f.image.pixels).enumerate() {
+            if !f.is_done(i) {
+                continue;
+            }
+            self.counts[i] += 1;
             for k in 0..3 {
                 s[k] += p[k] as f64;
             }
@@ -92,16 +103,41 @@ impl Accumulator {
         }
         self.frames += 1;
         self.rays += f.rays;
+        let j = &mut self.jobs;
+        j.finished += f.jobs.finished;
+        j.unfinished += f.jobs.unfinished;
+        j.suspended += f.jobs.suspended;
+        j.rays += f.jobs.rays;
+        j.wait_secs += f.jobs.wait_secs;
     }
 
-    /// The mean of the frames added (black before the first).
+    /// The mean of the frames added (black before the first), per pixel over the frames that
+    /// finished it.
     pub fn image(&self) -> Image {
-        let inv = 1.0 / self.frames.max(1) as f64;
         Image {
             width: self.width,
             height: self.height,
-            pixels: self.sum.iter().map(|s| s.map(|c| (c * inv) as f32)).collect(),
+            pixels: self
+                .sum
+                .iter()
+                .zip(&self.counts)
+                .map(|(s, &n)| {
+                    let inv = 1.0 / n.max(1) as f64;
+                    s.map(|c| (c * inv) as f32)
+                })
+                .collect(),
         }
+    }
+
+    /// The frame loops' statistics, summed over the frames added (pixels finished and
+    /// not, suspensions, time threads waited for tiles).
+    pub fn jobs(&self) -> JobStats {
+        self.jobs
+    }
+
+    /// Pixels no frame has finished yet.
+    pub fn unfinished(&self) -> usize {
+        self.counts.iter().filter(|&&n| n == 0).count()
     }
 
     /// The AOVs: depth the nearest over the frames, normal (renormalised) and albedo the
@@ -125,13 +161,16 @@ impl Accumulator {
     /// divided by the image's mean luminance. `None` before the second frame. It falls as
     /// 1 / sqrt(frames) for independent frames.
     pub fn error(&self) -> Option<f64> {
-        let n = self.frames as f64;
         if self.frames < 2 {
             return None;
         }
         let mut var_sum = 0.0;
         let mut lum_sum = 0.0;
-        for (s, q) in self.sum.iter().zip(&self.lum_sq) {
+        for ((s, q), &k) in self.sum.iter().zip(&self.lum_sq).zip(&self.counts) {
+            if k < 2 {
+                continue;
+            }
+            let n = k as f64;
             let mean = luminance(megaray_base::Vec3::new(s[0] as f32, s[1] as f32, s[2] as f32)) as f64 / n;
             let var = ((q / n - mean * mean) * n / (n - 1.0)).max(0.0);
             var_sum += var / n;

@@ -3,15 +3,17 @@
 //! [`Renderer::sample`] is the whole work of one sample: the camera ray, the shader at its
 //! hit (with whatever rays it fires), the AOVs. It is a pure function of (pixel, sample
 //! index) and the rays' answers, and returns [`Suspended`] if any ray was, so a paging frame
-//! loop can park the sample and run it again later. [`render_frame`] is the in-core loop:
-//! 32x32 pixel tiles over rayon's threads, each pixel `spp` samples, with a plain [`Tracer`]
-//! that never suspends.
+//! loop can park the sample and run it again later. [`render_frame`] is the frame loop:
+//! pixels in 32x32 tiles as [`megaray_trace::jobs`] over rayon's threads, each pixel `spp`
+//! samples; on a paged tracer, pixels that wait for tiles are parked and resumed.
 
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 use megaray_base::{Aabb, Vec3};
+
+use megaray_trace::jobs::{self, JobOptions, JobStats};
 use megaray_trace::{RayCaster, Suspended, Tracer};
-use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::env::Environment;
@@ -55,6 +57,9 @@ pub struct RenderSettings {
     pub ao_radius: f32,
     /// Whether samples compute the AOVs (depth, normal, albedo).
     pub aovs: bool,
+    /// End each frame after this long even if pixels are left (out-of-core rendering: the
+    /// pixels that wait for tiles are flagged in [`Frame::done`] and left to later frames).
+    pub frame_deadline: Option<Duration>,
 }
 
 impl RenderSettings {
@@ -71,6 +76,7 @@ impl RenderSettings {
             max_depth: 6,
             ao_radius: 0.05,
             aovs: false,
+            frame_deadline: None,
         }
     }
 }
@@ -229,32 +235,69 @@ pub struct Frame {
     pub depth: Vec<f32>,
     pub normal: Vec<[f32; 3]>,
     pub albedo: Vec<[f32; 3]>,
+    /// Per pixel, whether it was finished: empty when every pixel was. Only a frame with a
+    /// deadline ([`FrameOptions::deadline`]) can leave pixels unfinished; they are black.
+    pub done: Vec<bool>,
     /// Rays fired in the frame.
     pub rays: u64,
+    /// What the frame loop did: pixels finished and not, suspensions, waiting.
+    pub jobs: JobStats,
+}
+
+impl Frame {
+    /// Whether pixel `i` (row-major) was finished.
+    pub fn is_done(&self, i: usize) -> bool {
+        self.done.get(i).copied().unwrap_or(true)
+    }
+}
+
+/// How to run one frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct FrameOptions {
+    /// End the frame at this instant even if pixels are left (they are flagged in
+    /// [`Frame::done`]).
+    pub deadline: Option<Instant>,
 }
 
 /// The tile edge of the frame loop, in pixels.
 pub const TILE: u32 = 32;
 
-/// Renders frame `frame` (sample positions and light subsets move on from frame to frame):
-/// 32x32 tiles over the current rayon pool, [`Renderer::pixel`] for each pixel.
-pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
-    let (w, h) = (r.settings.camera.width, r.settings.camera.height);
-    let tiles_x = w.div_ceil(TILE);
-    let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
-    let results: Vec<Vec<SampleOut>> = tiles
-        .par_iter()
-        .map(|&(tx, ty)| {
-            let mut caster = tracer;
-            let mut out = Vec::with_capacity((TILE * TILE) as usize);
+/// Pixel indices (row-major) in the order the frame loop takes them: 32x32 tiles in rows,
+/// pixels in rows within a tile (neighbouring jobs see neighbouring pixels).
+fn tile_order(w: u32, h: u32) -> Vec<u32> {
+    let mut order = Vec::with_capacity((w * h) as usize);
+    for ty in 0..h.div_ceil(TILE) {
+        for tx in 0..w.div_ceil(TILE) {
             for y in ty * TILE..((ty + 1) * TILE).min(h) {
                 for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                    out.push(r.pixel(x, y, frame, &mut caster).expect("a plain in-core Tracer never suspends"));
+                    order.push(y * w + x);
                 }
             }
-            out
-        })
-        .collect();
+        }
+    }
+    order
+}
+
+/// Renders frame `frame` (sample positions and light subsets move on from frame to frame):
+/// [`Renderer::pixel`] for each pixel, in 32x32 tiles over the current rayon pool.
+/// With `settings.frame_deadline`, the frame ends that long after it started.
+pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
+    let deadline = r.settings.frame_deadline.map(|d| Instant::now() + d);
+    render_frame_with(r, tracer, frame, &FrameOptions { deadline })
+}
+
+/// [`render_frame`] with options. The pixels run as [`megaray_trace::jobs`]: on a paged
+/// tracer a pixel whose rays need a tile not yet resident is parked and finished when the
+/// tile has arrived, while the threads go on with other pixels; no thread waits on the disk
+/// while there is any pixel it can work on.
+pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &FrameOptions) -> Frame {
+    let (w, h) = (r.settings.camera.width, r.settings.camera.height);
+    let order = tile_order(w, h);
+    let job_opts = JobOptions { chunk: 64, deadline: opts.deadline };
+    let run = jobs::run(tracer, order.len(), &job_opts, |i, caster| {
+        let p = order[i];
+        r.pixel(p % w, p / w, frame, caster)
+    });
     let n = (w * h) as usize;
     let aovs = r.settings.aovs;
     let mut f = Frame {
@@ -262,22 +305,22 @@ pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
         depth: if aovs { vec![0.0; n] } else { Vec::new() },
         normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
         albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
+        done: if run.stats.unfinished > 0 { vec![false; n] } else { Vec::new() },
         rays: 0,
+        jobs: run.stats,
     };
-    for ((tx, ty), px) in tiles.iter().zip(results) {
-        let mut it = px.into_iter();
-        for y in ty * TILE..((ty + 1) * TILE).min(h) {
-            for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                let s = it.next().expect("tile pixel count");
-                let i = (y * w + x) as usize;
-                f.image.pixels[i] = s.radiance.to_array();
-                f.rays += s.rays as u64;
-                if aovs {
-                    f.depth[i] = s.depth;
-                    f.normal[i] = s.normal.to_array();
-                    f.albedo[i] = s.albedo.to_array();
-                }
-            }
+    for (&p, s) in order.iter().zip(run.results) {
+        let i = p as usize;
+        let Some(s) = s else { continue };
+        if !f.done.is_empty() {
+            f.done[i] = true;
+        }
+        f.image.pixels[i] = s.radiance.to_array();
+        f.rays += s.rays as u64;
+        if aovs {
+            f.depth[i] = s.depth;
+            f.normal[i] = s.normal.to_array();
+            f.albedo[i] = s.albedo.to_array();
         }
     }
     f

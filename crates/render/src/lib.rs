@@ -66,7 +66,9 @@ mod sky;
 pub use accum::{render_progressive, Accumulator, Stop};
 pub use camera::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
-pub use frame::{default_light, render_frame, Frame, RenderSettings, Renderer, SampleOut, TILE};
+pub use frame::{
+    default_light, render_frame, render_frame_with, Frame, FrameOptions, RenderSettings, Renderer, SampleOut, TILE,
+};
 pub use image_out::{read_exr, save_exr, srgb, Aovs, Image, ImageError, ToneCurve, ToneMap};
 pub use material::{Material, DEFAULT_ALBEDO};
 pub use sampling::{light_subset, pixel_offset, Sampler};
