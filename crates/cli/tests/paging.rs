@@ -176,3 +176,37 @@ fn a_corrupt_tile_is_reported_by_file_and_tile() {
     assert!(err.contains("paged.mray") && err.contains(&format!("tile {t}")) && err.contains("checksum"), "{err}");
     assert_eq!(pager.stats().corrupt, 1);
 }
+
+/// The command line: `render --mem` gives the same picture as no budget, `--json` carries
+/// the paging statistics, a budget below the minimum and `--deadline` behave.
+#[test]
+fn render_with_a_budget_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene(dir.path(), "plant:120k");
+    let path = scene.path().to_str().unwrap().to_string();
+    let bytes = std::fs::metadata(&path).unwrap().len();
+    let (a, b) = (dir.path().join("a.png"), dir.path().join("b.png"));
+    let common = ["--res", "96x64", "--cam-offset", "0,0.3,0.6", "--threads", "3"];
+    let (code, _, err) = run(&[&["render", &path, "-o", a.to_str().unwrap()], &common[..]].concat());
+    assert_eq!(code, 0, "{err}");
+    let mem = format!("{}", bytes / 4);
+    let args = [&["render", &path, "-o", b.to_str().unwrap(), "--mem", &mem, "--json"], &common[..]].concat();
+    let (code, out, err) = run(&args);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "the budgeted render differs");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    let p = &v["paging"];
+    assert!(p["tiles_loaded"].as_u64().unwrap() > 0 && p["suspensions"].as_u64().unwrap() > 0, "{p}");
+    assert_eq!(p["pixels_unfinished"].as_u64(), Some(0));
+    // Too small a budget: one line naming the file.
+    let (code, _, err) = run(&[&["render", &path, "-o", b.to_str().unwrap(), "--mem", "8K"], &common[..]].concat());
+    assert_eq!(code, 1);
+    assert!(err.contains("paged.mray") && err.contains("too small") && err.trim().lines().count() == 1, "{err}");
+    // A deadline of 0 ms ends the cold frame at once: pixels are left and counted.
+    let args = [&["render", &path, "-o", b.to_str().unwrap(), "--mem", &mem, "--deadline", "0", "--json"], &common[..]]
+        .concat();
+    let (code, out, err) = run(&args);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert!(v["paging"]["pixels_unfinished"].as_u64().unwrap() > 0, "{v}");
+}
