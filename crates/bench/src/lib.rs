@@ -165,6 +165,9 @@ pub struct BenchOptions {
     pub min_ms: f64,
     /// Scene name in the output (default: [`Source::name`]); `@close` is appended for [`View::Close`].
     pub name: Option<String>,
+    /// Trace within this memory budget for resident scene data (a [`megaray_page::Pager`]
+    /// with two fetchers); rays wait for missing tiles. `None`: the whole file is mapped.
+    pub mem: Option<u64>,
 }
 
 impl Default for BenchOptions {
@@ -178,6 +181,7 @@ impl Default for BenchOptions {
             reps: 5,
             min_ms: 200.0,
             name: None,
+            mem: None,
         }
     }
 }
@@ -301,7 +305,17 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
     let bounds = scene.header().bounds;
     let (w, h) = (opts.width, opts.height);
     let cam = Camera::framing(&bounds, opts.view.offset(), w, h);
-    let tracer = Tracer::new(scene);
+    let pager = match opts.mem {
+        Some(budget) => Some(
+            megaray_page::Pager::new(scene.clone(), megaray_page::PagerOptions { budget, fetchers: 2 })
+                .map_err(|e| BenchError::Option(e.to_string()))?,
+        ),
+        None => None,
+    };
+    let tracer = match &pager {
+        Some(p) => Tracer::paged(p),
+        None => Tracer::new(scene),
+    };
     on(Event::Info(format!(
         "camera eye ({} {} {}) at ({} {} {}), {w}x{h}",
         cam.eye.x,

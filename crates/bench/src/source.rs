@@ -8,6 +8,7 @@ use megaray_build::{build_scene, BuildOptions};
 use megaray_gen::GenSpec;
 use megaray_import::{import_file, ImportError, ImportOptions, Material, TriAttr, TriangleSink};
 use megaray_scene::Scene;
+use std::sync::Arc;
 
 use crate::BenchError;
 
@@ -69,7 +70,7 @@ impl Source {
 /// An open scene, with what is needed to get its triangles back into memory.
 pub struct Loaded {
     /// The scene file, memory-mapped. (Declared before `tmp`, so it is closed first.)
-    pub scene: Scene,
+    pub scene: Arc<Scene>,
     /// The default scene name (see [`Source::name`]).
     pub name: String,
     /// How the scene was obtained, for the user: `opened x.mray`, `built from x.obj in 0.4 s`.
@@ -88,7 +89,7 @@ impl Loaded {
         let t0 = Instant::now();
         let (mesh, tmp) = match src {
             Source::Scene(p) => {
-                let scene = Scene::open(p)?;
+                let scene = Arc::new(Scene::open(p)?);
                 let origin = format!("opened {}", p.display());
                 return Ok(Loaded { scene, name: src.name(), origin, mesh: None, tmp: None });
             }
@@ -105,7 +106,7 @@ impl Loaded {
         let opts = BuildOptions { build_mem: BUILD_MEM, ..BuildOptions::default() };
         build_scene(std::slice::from_ref(&mesh), &out, &opts, progress)?;
         progress.finish();
-        let scene = Scene::open(&out)?;
+        let scene = Arc::new(Scene::open(&out)?);
         let what = match src {
             Source::Gen { text, .. } => format!("generated {text} and built it"),
             _ => format!("built from {}", mesh.display()),

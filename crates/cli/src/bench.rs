@@ -46,6 +46,11 @@ pub struct BenchArgs {
     /// with --cam close).
     #[arg(long, value_name = "NAME")]
     name: Option<String>,
+    /// Trace within this memory budget for resident scene data (e.g. 512M): tiles are paged
+    /// in by fetcher threads and evicted to hold it; rays wait for missing tiles. Default:
+    /// the whole scene file is mapped.
+    #[arg(long, value_name = "SIZE", value_parser = |s: &str| megaray_base::parse_size(s).map_err(|e| e.to_string()))]
+    mem: Option<u64>,
 }
 
 pub fn bench(a: BenchArgs, bars: &dyn Progress) -> Result<()> {
@@ -62,6 +67,7 @@ pub fn bench(a: BenchArgs, bars: &dyn Progress) -> Result<()> {
         reps: a.reps,
         min_ms: a.min_ms,
         name: a.name,
+        mem: a.mem,
     };
     opts.check()?;
     let src = Source::parse(&a.scene)?;
