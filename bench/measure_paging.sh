@@ -1,0 +1,41 @@
+#!/bin/bash
+# Issue 4's out-of-core rendering figures: a scene much larger than the budget rendered
+# with no budget and with --mem, cold then warm (the same view three times: --orbit 3:0),
+# images compared, peak RSS; then a 100-frame camera path (a quarter orbit) with frame times
+# and bytes read; then the two tile load paths (map + WILLNEED against pread).
+# Needs root (drop_caches) and a built scene:
+#
+#   megaray gen plant:300M -o plant300M.ply && megaray build plant300M.ply -o plant300M.mray
+#   SCENE=plant300M.mray MEM=2G bench/measure_paging.sh
+set -u
+root=$(cd "$(dirname "$0")/.." && pwd)
+SCENE=${SCENE:?set SCENE to a .mray file}
+MEM=${MEM:-2G}
+RES=${RES:-1024x768}
+OUT=${OUT:-$(dirname "$SCENE")}
+cargo build --release -q -p megaray --manifest-path "$root/Cargo.toml" || exit 1
+cargo build --release -q -p megaray-page --example load_paths --manifest-path "$root/Cargo.toml" || exit 1
+M=$root/target/release/megaray
+drop() { sync; echo 3 > /proc/sys/vm/drop_caches 2>/dev/null || echo "(could not drop caches: figures are warm)"; }
+echo "scene $(ls -la "$SCENE" | awk '{print $5}') bytes; loadavg $(cut -d' ' -f1-3 /proc/loadavg)"
+for mode in unlimited budget; do
+  drop
+  extra=(); [ $mode = budget ] && extra=(--mem "$MEM")
+  echo "== $mode: the same view three times (frame 0 cold)"
+  /usr/bin/time -v $M render "$SCENE" -o "$OUT/paging-$mode.png" --res "$RES" --orbit 3:0 --json "${extra[@]}" \
+    > "$OUT/paging-$mode.jsonl" 2> "$OUT/paging-$mode.time"
+  cat "$OUT/paging-$mode.jsonl"
+  grep -E "Elapsed|Maximum resident" "$OUT/paging-$mode.time"
+done
+cmp "$OUT/paging-unlimited.png" "$OUT/paging-budget.png" && echo "images identical"
+for dl in none 100; do
+  drop
+  extra=(); [ $dl != none ] && extra=(--deadline "$dl")
+  echo "== camera path: 100 frames over 90 degrees, --mem $MEM, deadline $dl"
+  /usr/bin/time -v $M render "$SCENE" -o "$OUT/path-$dl.png" --res "$RES" --orbit 100:90 --json --mem "$MEM" "${extra[@]}" \
+    > "$OUT/path-$dl.jsonl" 2> "$OUT/path-$dl.time"
+  tail -1 "$OUT/path-$dl.jsonl"
+  grep -E "Elapsed|Maximum resident" "$OUT/path-$dl.time"
+done
+echo "== tile load paths, cold"
+"$root/target/release/examples/load_paths" "$SCENE" 3000 1,2,4
