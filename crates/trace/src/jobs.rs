@@ -228,6 +228,9 @@ where
         let mut replay = Replay::new(tracer);
         let mut to_park: Vec<(u32, Parked)> = Vec::new();
         let mut seen_arrivals = u64::MAX;
+        // Set after a wait that saw no tile arrive: ask again for the tiles parked jobs wait
+        // for (one may have arrived and been evicted before its jobs ran).
+        let mut stale = false;
         loop {
             if opts.deadline.is_some_and(|d| Instant::now() >= d) {
                 late.store(true, SeqCst);
@@ -242,20 +245,19 @@ where
                 if arrivals != seen_arrivals {
                     seen_arrivals = arrivals;
                     let mut l = lock();
-                    // Tiles that arrived; the others are asked for again (deduplicated), in
-                    // case one arrived and was evicted before its jobs ran.
                     let tiles: Vec<u32> = l
                         .by_tile
                         .keys()
                         .copied()
                         .filter(|&t| {
                             let ok = p.settled(t);
-                            if !ok {
+                            if !ok && stale {
                                 p.request(t);
                             }
                             ok
                         })
                         .collect();
+                    stale = false;
                     for t in tiles {
                         let jobs = l.by_tile.remove(&t).unwrap_or_default();
                         l.count -= jobs.len();
@@ -283,7 +285,7 @@ where
                     let timeout = opts.deadline.map_or(Duration::from_millis(50), |d| {
                         d.saturating_duration_since(t0).min(Duration::from_millis(50))
                     });
-                    p.wait_arrival(arrivals, timeout);
+                    stale = p.wait_arrival(arrivals, timeout) == arrivals;
                     wait_ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
                     seen_arrivals = u64::MAX;
                 }
@@ -291,7 +293,7 @@ where
                 // Too many parked: wait for tiles before taking new work.
                 let p = pager.expect("jobs are parked only on paged tracers");
                 let t0 = Instant::now();
-                p.wait_arrival(arrivals, Duration::from_millis(50));
+                stale = p.wait_arrival(arrivals, Duration::from_millis(50)) == arrivals;
                 wait_ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
                 seen_arrivals = u64::MAX;
             }
