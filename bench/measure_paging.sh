@@ -28,14 +28,17 @@ for mode in unlimited budget; do
   grep -E "Elapsed|Maximum resident" "$OUT/paging-$mode.time"
 done
 cmp "$OUT/paging-unlimited.png" "$OUT/paging-budget.png" && echo "images identical"
-for dl in none 100; do
+# The path at full size with a deadline (frames end on time, pixels left are counted), and
+# without one at PATH_RES (every pixel finished, frames as long as their reads).
+for run in "deadline:$RES:${DEADLINE:-500}" "full:${PATH_RES:-256x192}:none"; do
+  IFS=: read -r name res dl <<< "$run"
   drop
-  extra=(); [ $dl != none ] && extra=(--deadline "$dl")
-  echo "== camera path: 100 frames over 90 degrees, --mem $MEM, deadline $dl"
-  /usr/bin/time -v $M render "$SCENE" -o "$OUT/path-$dl.png" --res "$RES" --orbit 100:90 --json --mem "$MEM" "${extra[@]}" \
-    > "$OUT/path-$dl.jsonl" 2> "$OUT/path-$dl.time"
-  tail -1 "$OUT/path-$dl.jsonl"
-  grep -E "Elapsed|Maximum resident" "$OUT/path-$dl.time"
+  extra=(); [ "$dl" != none ] && extra=(--deadline "$dl")
+  echo "== camera path: 100 frames over 90 degrees at $res, --mem $MEM, deadline $dl ms"
+  /usr/bin/time -v $M render "$SCENE" -o "$OUT/path-$name.png" --res "$res" --orbit 100:90 --json --mem "$MEM" "${extra[@]}" \
+    > "$OUT/path-$name.jsonl" 2> "$OUT/path-$name.time"
+  tail -1 "$OUT/path-$name.jsonl"
+  grep -E "Elapsed|Maximum resident" "$OUT/path-$name.time"
 done
 echo "== tile load paths, cold"
-"$root/target/release/examples/load_paths" "$SCENE" 3000 1,2,4
+"$root/target/release/examples/load_paths" "$SCENE" 4000 1,2,8,16

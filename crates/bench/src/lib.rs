@@ -166,7 +166,7 @@ pub struct BenchOptions {
     /// Scene name in the output (default: [`Source::name`]); `@close` is appended for [`View::Close`].
     pub name: Option<String>,
     /// Trace within this memory budget for resident scene data (a [`megaray_page::Pager`]
-    /// with two fetchers); rays wait for missing tiles. `None`: the whole file is mapped.
+    /// with eight fetchers); rays wait for missing tiles. `None`: the whole file is mapped.
     pub mem: Option<u64>,
 }
 
@@ -307,7 +307,7 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
     let cam = Camera::framing(&bounds, opts.view.offset(), w, h);
     let pager = match opts.mem {
         Some(budget) => Some(
-            megaray_page::Pager::new(scene.clone(), megaray_page::PagerOptions { budget, fetchers: 2 })
+            megaray_page::Pager::new(scene.clone(), megaray_page::PagerOptions { budget, fetchers: 8 })
                 .map_err(|e| BenchError::Option(e.to_string()))?,
         ),
         None => None,

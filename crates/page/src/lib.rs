@@ -89,8 +89,8 @@ pub enum Access {
 pub struct PagerOptions {
     /// Budget for resident scene bytes: the pinned tables plus resident tiles.
     pub budget: u64,
-    /// Number of fetcher threads (loads in flight at once). 2 is a good default on a
-    /// local disk; more helps on network storage.
+    /// Number of fetcher threads (loads in flight at once). Random tile reads scale with
+    /// the reads in flight: 8 is a good default on a local SSD.
     pub fetchers: usize,
 }
 
