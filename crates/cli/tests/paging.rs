@@ -210,3 +210,36 @@ fn render_with_a_budget_from_the_command_line() {
     let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
     assert!(v["paging"]["pixels_unfinished"].as_u64().unwrap() > 0, "{v}");
 }
+
+/// `render --mem` on a scene with a damaged tile: one line naming the file and the tile.
+#[test]
+fn render_with_a_budget_reports_a_corrupt_tile() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene(dir.path(), "plant:60k");
+    let path = scene.path().to_path_buf();
+    // The root tile of the part nearest the middle of the part list: the view enters it.
+    let t = scene.parts()[scene.parts().len() / 2].root_tile;
+    let off = scene.tiles()[t as usize].offset + 64;
+    let mem = (std::fs::metadata(&path).unwrap().len() / 2).to_string();
+    drop(scene);
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[off as usize] ^= 0x01;
+    std::fs::write(&path, &bytes).unwrap();
+    let out = dir.path().join("c.png");
+    let (code, _, err) = run(&[
+        "render",
+        path.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--res",
+        "64x48",
+        "--cam-offset",
+        "0,0.3,0.6",
+        "--mem",
+        &mem,
+    ]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("paged.mray") && err.contains(&format!("tile {t}")), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(!out.exists(), "no image is written from a damaged scene");
+}
