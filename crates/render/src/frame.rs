@@ -7,6 +7,7 @@
 //! pixels in 32x32 tiles as [`megaray_trace::jobs`] over rayon's threads, each pixel `spp`
 //! samples; on a paged tracer, pixels that wait for tiles are parked and resumed.
 
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -106,6 +107,9 @@ pub struct Renderer {
     eps: f32,
     diagonal: f32,
     textures: TextureCache,
+    /// Frames run so far: the frame loop walks the pixels forward on even passes and
+    /// backward on odd ones (see [`render_frame_with`]).
+    passes: AtomicU32,
 }
 
 impl Renderer {
@@ -121,6 +125,7 @@ impl Renderer {
             has_env: false,
             diagonal,
             textures: TextureCache::default(),
+            passes: AtomicU32::new(0),
             settings,
         }
     }
@@ -292,7 +297,14 @@ pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
 /// while there is any pixel it can work on.
 pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &FrameOptions) -> Frame {
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
-    let order = tile_order(w, h);
+    let mut order = tile_order(w, h);
+    // Every other frame walks the pixels backward. When a frame needs more tiles than the
+    // memory budget holds, walking them in the same order every time is the worst case of
+    // least-recently-used eviction (each tile is evicted just before it is needed again);
+    // walking back starts with the tiles the last frame used last, still resident.
+    if r.passes.fetch_add(1, Ordering::Relaxed) % 2 == 1 {
+        order.reverse();
+    }
     let job_opts = JobOptions { chunk: 64, deadline: opts.deadline };
     let run = jobs::run(tracer, order.len(), &job_opts, |i, caster| {
         let p = order[i];
