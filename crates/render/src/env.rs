@@ -90,13 +90,24 @@ impl EnvMap {
         dir_from_angles(PI * v, 2.0 * PI * u + self.rotate)
     }
 
-    /// The radiance seen in direction `d` (normalised), nearest pixel.
+    /// The radiance seen in direction `d` (normalised), bilinear between pixel centres
+    /// (wrapping around in azimuth, clamped at the poles).
     pub fn eval(&self, d: Vec3) -> Vec3 {
         let theta = d.y.clamp(-1.0, 1.0).acos();
         let phi = (d.z.atan2(d.x) - self.rotate).rem_euclid(2.0 * PI);
-        let x = ((phi / (2.0 * PI) * self.width as f32) as u32).min(self.width - 1);
-        let y = ((theta / PI * self.height as f32) as u32).min(self.height - 1);
-        Vec3::from(self.pixels[(y * self.width + x) as usize]) * self.scale
+        let fx = phi / (2.0 * PI) * self.width as f32 - 0.5;
+        let fy = (theta / PI * self.height as f32 - 0.5).clamp(0.0, (self.height - 1) as f32);
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (tx, ty) = (fx - x0, fy - y0);
+        let w = self.width as i64;
+        let xa = (x0 as i64).rem_euclid(w) as u32;
+        let xb = (x0 as i64 + 1).rem_euclid(w) as u32;
+        let ya = y0 as u32;
+        let yb = (ya + 1).min(self.height - 1);
+        let px = |x: u32, y: u32| Vec3::from(self.pixels[(y * self.width + x) as usize]);
+        let top = px(xa, ya).lerp(px(xb, ya), tx);
+        let bottom = px(xa, yb).lerp(px(xb, yb), tx);
+        top.lerp(bottom, ty) * self.scale
     }
 
     /// The solid angle of a pixel of row `y`.
@@ -263,8 +274,15 @@ mod tests {
         for rot in [0.0, 1.0] {
             m.rotate = rot;
             let d = m.direction(5.5 / 16.0, 3.5 / 8.0);
-            assert_eq!(m.eval(d), Vec3::new(1.0, 2.0, 3.0));
+            assert!((m.eval(d) - Vec3::new(1.0, 2.0, 3.0)).abs().max_element() < 1e-4);
+            // Half way to the next pixel: half the value.
+            let d = m.direction(6.0 / 16.0, 3.5 / 8.0);
+            assert!((m.eval(d) - Vec3::new(0.5, 1.0, 1.5)).abs().max_element() < 1e-4);
         }
+        // Wrapping around in azimuth.
+        m.pixels[3 * 16 + 15] = [4.0; 3];
+        m.rotate = 0.0;
+        assert!((m.eval(m.direction(0.0, 3.5 / 8.0)) - Vec3::splat(2.0)).abs().max_element() < 1e-4);
     }
 
     #[test]
