@@ -593,6 +593,9 @@ pub struct DemoArgs {
     /// The procedural sky (see `megaray gen --help`).
     #[arg(long, value_name = "SPEC", default_value = "sky:sun_elev=35,sun_azim=120,turbidity=3")]
     sky: String,
+    /// PNG exposure in stops (the sunlit white plant is brighter than 1 at 0).
+    #[arg(long, value_name = "EV", default_value_t = -0.5, allow_hyphen_values = true)]
+    exposure: f32,
 }
 
 fn cache_dir(given: Option<PathBuf>) -> PathBuf {
@@ -646,6 +649,7 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     r.sky = Some(a.sky);
     r.frames = Some(a.frames.max(1));
     r.light_samples = a.light_samples;
+    r.exposure = a.exposure;
     render(r, bars)?;
     println!("{}", png.display());
     Ok(())
