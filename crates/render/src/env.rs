@@ -32,14 +32,18 @@ pub fn luminance(c: Vec3) -> f32 {
 #[derive(Debug, thiserror::Error)]
 #[error("{}: cannot read environment map: {msg}", path.display())]
 pub struct EnvError {
+    /// The map's file.
     pub path: PathBuf,
+    /// What is wrong with it.
     pub msg: String,
 }
 
 /// A latitude-longitude map of radiance (see the module documentation for the convention).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EnvMap {
+    /// Pixels around (azimuth 0 to 360 degrees).
     pub width: u32,
+    /// Pixels from the zenith (top) to the nadir.
     pub height: u32,
     /// Linear RGB radiance, row by row from the top (+Y).
     pub pixels: Vec<[f32; 3]>,
@@ -150,7 +154,9 @@ pub fn dir_from_angles(theta: f32, phi: f32) -> Vec3 {
 /// facing it, RGB).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DirLight {
+    /// Unit direction toward the light.
     pub dir: Vec3,
+    /// Irradiance it gives a surface facing it (RGB).
     pub weight: Vec3,
 }
 
@@ -240,7 +246,9 @@ impl EnvLights {
 /// An environment: what rays that miss see, and the virtual lights that stand for it.
 #[derive(Clone, Debug)]
 pub struct Environment {
+    /// The map rays that miss look up.
     pub map: EnvMap,
+    /// Its virtual lights.
     pub lights: EnvLights,
 }
 
