@@ -416,8 +416,10 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     let acc = pool.install(|| {
         render_progressive(&renderer, &tracer, stop, |acc| {
             bars.inc(1);
-            let err = acc.error().map(|e| format!("error ~{:.2}%", 100.0 * e)).unwrap_or_default();
-            bars.message(&format!("frame {} {err}", acc.frames()));
+            if bars.visible() {
+                let err = acc.error().map(|e| format!("error ~{:.2}%", 100.0 * e)).unwrap_or_default();
+                bars.message(&format!("frame {} {err}", acc.frames()));
+            }
             if let Some(r) = &reference {
                 let rmse = acc.image().relative_rmse(r);
                 eprintln!(

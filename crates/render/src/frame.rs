@@ -247,23 +247,32 @@ pub const TILE: u32 = 32;
 /// 32x32 tiles over the current rayon pool, [`Renderer::pixel`] for each pixel.
 pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
+    let aovs = r.settings.aovs;
     let tiles_x = w.div_ceil(TILE);
     let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
-    let results: Vec<Vec<SampleOut>> = tiles
+    // Per tile: its pixels in row order (and AOVs only when asked: the buffers are rebuilt
+    // every frame, so they are kept small).
+    let results: Vec<TileOut> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let mut caster = tracer;
-            let mut out = Vec::with_capacity((TILE * TILE) as usize);
+            let mut out = TileOut::default();
             for y in ty * TILE..((ty + 1) * TILE).min(h) {
                 for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                    out.push(r.pixel(x, y, frame, &mut caster).expect("a plain in-core Tracer never suspends"));
+                    let s = r.pixel(x, y, frame, &mut caster).expect("a plain in-core Tracer never suspends");
+                    out.color.push(s.radiance.to_array());
+                    out.rays += s.rays as u64;
+                    if aovs {
+                        out.depth.push(s.depth);
+                        out.normal.push(s.normal.to_array());
+                        out.albedo.push(s.albedo.to_array());
+                    }
                 }
             }
             out
         })
         .collect();
     let n = (w * h) as usize;
-    let aovs = r.settings.aovs;
     let mut f = Frame {
         image: Image::new(w, h),
         depth: if aovs { vec![0.0; n] } else { Vec::new() },
@@ -271,21 +280,30 @@ pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
         albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
         rays: 0,
     };
-    for ((tx, ty), px) in tiles.iter().zip(results) {
-        let mut it = px.into_iter();
-        for y in ty * TILE..((ty + 1) * TILE).min(h) {
-            for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                let s = it.next().expect("tile pixel count");
-                let i = (y * w + x) as usize;
-                f.image.pixels[i] = s.radiance.to_array();
-                f.rays += s.rays as u64;
-                if aovs {
-                    f.depth[i] = s.depth;
-                    f.normal[i] = s.normal.to_array();
-                    f.albedo[i] = s.albedo.to_array();
-                }
+    for ((tx, ty), t) in tiles.iter().zip(results) {
+        f.rays += t.rays;
+        let (x0, x1) = (tx * TILE, ((tx + 1) * TILE).min(w));
+        let tw = (x1 - x0) as usize;
+        for (row, y) in (ty * TILE..((ty + 1) * TILE).min(h)).enumerate() {
+            let dst = (y * w + x0) as usize..(y * w + x1) as usize;
+            let src = row * tw..(row + 1) * tw;
+            f.image.pixels[dst.clone()].copy_from_slice(&t.color[src.clone()]);
+            if aovs {
+                f.depth[dst.clone()].copy_from_slice(&t.depth[src.clone()]);
+                f.normal[dst.clone()].copy_from_slice(&t.normal[src.clone()]);
+                f.albedo[dst].copy_from_slice(&t.albedo[src]);
             }
         }
     }
     f
+}
+
+/// The pixels of one tile, row by row.
+#[derive(Default)]
+struct TileOut {
+    color: Vec<[f32; 3]>,
+    depth: Vec<f32>,
+    normal: Vec<[f32; 3]>,
+    albedo: Vec<[f32; 3]>,
+    rays: u64,
 }
