@@ -459,8 +459,10 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     let acc = pool.install(|| {
         render_progressive(&renderer, &tracer, stop, |acc| {
             bars.inc(1);
-            let err = acc.error().map(|e| format!("error ~{:.2}%", 100.0 * e)).unwrap_or_default();
-            bars.message(&format!("frame {} {err}", acc.frames()));
+            if bars.visible() {
+                let err = acc.error().map(|e| format!("error ~{:.2}%", 100.0 * e)).unwrap_or_default();
+                bars.message(&format!("frame {} {err}", acc.frames()));
+            }
             if let Some(r) = &reference {
                 let rmse = acc.image().relative_rmse(r);
                 eprintln!(
@@ -643,6 +645,9 @@ pub struct DemoArgs {
     /// The procedural sky (see `megaray gen --help`).
     #[arg(long, value_name = "SPEC", default_value = "sky:sun_elev=35,sun_azim=120,turbidity=3")]
     sky: String,
+    /// PNG exposure in stops (the sunlit white plant is brighter than 1 at 0).
+    #[arg(long, value_name = "EV", default_value_t = -0.5, allow_hyphen_values = true)]
+    exposure: f32,
 }
 
 fn cache_dir(given: Option<PathBuf>) -> PathBuf {
@@ -696,6 +701,7 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     r.sky = Some(a.sky);
     r.frames = Some(a.frames.max(1));
     r.light_samples = a.light_samples;
+    r.exposure = a.exposure;
     render(r, bars)?;
     println!("{}", png.display());
     Ok(())

@@ -19,6 +19,11 @@ impl Bars {
 }
 
 impl Bars {
+    /// Whether bars are drawn (a terminal, no `--quiet`).
+    pub fn visible(&self) -> bool {
+        self.enabled
+    }
+
     /// Replaces the current bar's message (e.g. the frame count and error estimate).
     pub fn message(&self, msg: &str) {
         if let Some(b) = self.bar.lock().unwrap().as_ref() {

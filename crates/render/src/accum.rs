@@ -186,7 +186,9 @@ impl Accumulator {
 /// (checked after each frame; at least one frame is always rendered), whichever comes first.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Stop {
+    /// Stop after this many frames.
     pub frames: Option<u32>,
+    /// Stop once this much time has passed (checked after each frame).
     pub time: Option<Duration>,
 }
 

@@ -4,13 +4,19 @@ use megaray_base::{Aabb, Ray, Vec3};
 /// sample offset (0.5, 0.5), exactly as the benchmark definitions (`shared/BENCH.md`) say.
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
+    /// Position of the eye.
     pub eye: Vec3,
+    /// Unit viewing direction.
     pub fwd: Vec3,
+    /// Unit vector to the image's right.
     pub right: Vec3,
+    /// Unit vector to the image's top.
     pub up: Vec3,
     /// tan(vertical fov / 2)
     pub tan_half: f32,
+    /// Image width in pixels.
     pub width: u32,
+    /// Image height in pixels.
     pub height: u32,
 }
 

@@ -32,14 +32,18 @@ pub fn luminance(c: Vec3) -> f32 {
 #[derive(Debug, thiserror::Error)]
 #[error("{}: cannot read environment map: {msg}", path.display())]
 pub struct EnvError {
+    /// The map's file.
     pub path: PathBuf,
+    /// What is wrong with it.
     pub msg: String,
 }
 
 /// A latitude-longitude map of radiance (see the module documentation for the convention).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EnvMap {
+    /// Pixels around (azimuth 0 to 360 degrees).
     pub width: u32,
+    /// Pixels from the zenith (top) to the nadir.
     pub height: u32,
     /// Linear RGB radiance, row by row from the top (+Y).
     pub pixels: Vec<[f32; 3]>,
@@ -90,13 +94,24 @@ impl EnvMap {
         dir_from_angles(PI * v, 2.0 * PI * u + self.rotate)
     }
 
-    /// The radiance seen in direction `d` (normalised), nearest pixel.
+    /// The radiance seen in direction `d` (normalised), bilinear between pixel centres
+    /// (wrapping around in azimuth, clamped at the poles).
     pub fn eval(&self, d: Vec3) -> Vec3 {
         let theta = d.y.clamp(-1.0, 1.0).acos();
         let phi = (d.z.atan2(d.x) - self.rotate).rem_euclid(2.0 * PI);
-        let x = ((phi / (2.0 * PI) * self.width as f32) as u32).min(self.width - 1);
-        let y = ((theta / PI * self.height as f32) as u32).min(self.height - 1);
-        Vec3::from(self.pixels[(y * self.width + x) as usize]) * self.scale
+        let fx = phi / (2.0 * PI) * self.width as f32 - 0.5;
+        let fy = (theta / PI * self.height as f32 - 0.5).clamp(0.0, (self.height - 1) as f32);
+        let (x0, y0) = (fx.floor(), fy.floor());
+        let (tx, ty) = (fx - x0, fy - y0);
+        let w = self.width as i64;
+        let xa = (x0 as i64).rem_euclid(w) as u32;
+        let xb = (x0 as i64 + 1).rem_euclid(w) as u32;
+        let ya = y0 as u32;
+        let yb = (ya + 1).min(self.height - 1);
+        let px = |x: u32, y: u32| Vec3::from(self.pixels[(y * self.width + x) as usize]);
+        let top = px(xa, ya).lerp(px(xb, ya), tx);
+        let bottom = px(xa, yb).lerp(px(xb, yb), tx);
+        top.lerp(bottom, ty) * self.scale
     }
 
     /// The solid angle of a pixel of row `y`.
@@ -139,7 +154,9 @@ pub fn dir_from_angles(theta: f32, phi: f32) -> Vec3 {
 /// facing it, RGB).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DirLight {
+    /// Unit direction toward the light.
     pub dir: Vec3,
+    /// Irradiance it gives a surface facing it (RGB).
     pub weight: Vec3,
 }
 
@@ -229,7 +246,9 @@ impl EnvLights {
 /// An environment: what rays that miss see, and the virtual lights that stand for it.
 #[derive(Clone, Debug)]
 pub struct Environment {
+    /// The map rays that miss look up.
     pub map: EnvMap,
+    /// Its virtual lights.
     pub lights: EnvLights,
 }
 
@@ -263,8 +282,15 @@ mod tests {
         for rot in [0.0, 1.0] {
             m.rotate = rot;
             let d = m.direction(5.5 / 16.0, 3.5 / 8.0);
-            assert_eq!(m.eval(d), Vec3::new(1.0, 2.0, 3.0));
+            assert!((m.eval(d) - Vec3::new(1.0, 2.0, 3.0)).abs().max_element() < 1e-4);
+            // Half way to the next pixel: half the value.
+            let d = m.direction(6.0 / 16.0, 3.5 / 8.0);
+            assert!((m.eval(d) - Vec3::new(0.5, 1.0, 1.5)).abs().max_element() < 1e-4);
         }
+        // Wrapping around in azimuth.
+        m.pixels[3 * 16 + 15] = [4.0; 3];
+        m.rotate = 0.0;
+        assert!((m.eval(m.direction(0.0, 3.5 / 8.0)) - Vec3::splat(2.0)).abs().max_element() < 1e-4);
     }
 
     #[test]

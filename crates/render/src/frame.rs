@@ -32,6 +32,7 @@ pub fn default_light() -> Vec3 {
 /// How to render.
 #[derive(Clone, Debug)]
 pub struct RenderSettings {
+    /// The camera (and the image size).
     pub camera: Camera,
     /// Direction toward the directional light (normalised where used). It lights the
     /// `diffuse` and `phong` shaders when there is no environment.
@@ -64,6 +65,8 @@ pub struct RenderSettings {
 }
 
 impl RenderSettings {
+    /// The defaults for `camera`: the benchmark light, 1 sample per pixel, the `diffuse`
+    /// shader, 2 light samples, depth limit 6, no AOVs.
     pub fn new(camera: Camera) -> RenderSettings {
         RenderSettings {
             camera,
@@ -100,6 +103,7 @@ pub struct SampleOut {
 /// Everything needed to shade samples: settings, shader, environment, texture cache. Shared
 /// by all threads.
 pub struct Renderer {
+    /// The settings it renders with.
     pub settings: RenderSettings,
     shader: Arc<dyn Shader>,
     env: Arc<Environment>,
@@ -235,10 +239,13 @@ impl Renderer {
 /// One rendered frame: the image and (with `settings.aovs`) the AOVs.
 #[derive(Clone, Debug)]
 pub struct Frame {
+    /// The mean radiance of each pixel's samples.
     pub image: Image,
-    /// Per pixel; empty without `settings.aovs`.
+    /// Per pixel, the nearest primary hit distance; empty without `settings.aovs`.
     pub depth: Vec<f32>,
+    /// Per pixel, the mean shading normal (renormalised); empty without `settings.aovs`.
     pub normal: Vec<[f32; 3]>,
+    /// Per pixel, the mean albedo; empty without `settings.aovs`.
     pub albedo: Vec<[f32; 3]>,
     /// Per pixel, whether it was finished: empty when every pixel was. Only a frame with a
     /// deadline ([`FrameOptions::deadline`]) can leave pixels unfinished; they are black.

@@ -7,8 +7,11 @@ use std::path::{Path, PathBuf};
 /// A linear RGB float image, row by row from the top.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Image {
+    /// Width in pixels.
     pub width: u32,
+    /// Height in pixels.
     pub height: u32,
+    /// Linear RGB, `width * height`, row by row from the top.
     pub pixels: Vec<[f32; 3]>,
 }
 
@@ -28,7 +31,9 @@ pub struct Aovs {
 #[derive(Debug, thiserror::Error)]
 #[error("{}: cannot write image: {msg}", path.display())]
 pub struct ImageError {
+    /// The image's file.
     pub path: std::path::PathBuf,
+    /// What went wrong.
     pub msg: String,
 }
 
@@ -47,6 +52,7 @@ pub enum ToneCurve {
 pub struct ToneMap {
     /// Exposure in stops (EV): the linear values are multiplied by `2^exposure`.
     pub exposure: f32,
+    /// The curve applied after the exposure.
     pub curve: ToneCurve,
 }
 
@@ -88,6 +94,7 @@ fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), String>
 }
 
 impl Image {
+    /// A black image.
     pub fn new(width: u32, height: u32) -> Image {
         Image { width, height, pixels: vec![[0.0; 3]; width as usize * height as usize] }
     }

@@ -52,6 +52,8 @@
 //! acc.image().save_png("out.png".as_ref()).unwrap();
 //! ```
 
+#![warn(missing_docs)]
+
 mod accum;
 mod camera;
 mod env;

@@ -38,6 +38,7 @@ use crate::sampling::Sampler;
 /// origin. Implementations must be deterministic given the context's sampler (no other
 /// source of randomness), and pass [`Suspended`] on.
 pub trait Shader: Send + Sync {
+    /// The radiance leaving `hit` back along `ray` (toward `-ray.dir`).
     fn shade(&self, ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended>;
 }
 
@@ -45,6 +46,7 @@ pub trait Shader: Send + Sync {
 /// shading normal, both unit length and on the side the ray came from.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfaceHit {
+    /// The tracer's hit record.
     pub hit: Hit,
     /// The hit point.
     pub p: Vec3,

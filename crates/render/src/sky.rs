@@ -30,11 +30,17 @@ use crate::image_out::{temp_path, ImageError};
 /// The parameters of a procedural sky (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SkySpec {
+    /// Sun elevation above the horizon, degrees.
     pub sun_elev: f32,
+    /// Sun azimuth, degrees from +X toward +Z.
     pub sun_azim: f32,
+    /// Haze, 1.7 (clear) to 10 (hazy).
     pub turbidity: f32,
+    /// Irradiance (luminance) of the sun disk on a surface facing it.
     pub sun: f32,
+    /// Angular diameter of the sun disk, degrees.
     pub sun_size: f32,
+    /// Map width in pixels (the height is half).
     pub width: u32,
 }
 
