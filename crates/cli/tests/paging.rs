@@ -33,7 +33,8 @@ fn frame(tracer: &Tracer, cam: &Camera) -> (Vec<Answer>, jobs::JobStats) {
     let eps = 1e-4 * tracer.scene().header().bounds.diagonal();
     let n = (cam.width * cam.height) as usize;
     let r = jobs::run(tracer, n, &JobOptions::default(), |i, c| pixel(cam, eps, i, c));
-    (r.results.into_iter().map(|a| a.expect("no deadline: every job finishes")).collect(), r.stats)
+    let stats = r.stats;
+    (r.into_ordered(n).into_iter().map(|a| a.expect("no deadline: every job finishes")).collect(), stats)
 }
 
 fn pool(threads: usize) -> rayon::ThreadPool {

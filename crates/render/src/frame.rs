@@ -15,6 +15,7 @@ use megaray_base::{Aabb, Vec3};
 
 use megaray_trace::jobs::{self, JobOptions, JobStats};
 use megaray_trace::{RayCaster, Suspended, Tracer};
+use rayon::prelude::*;
 
 use crate::camera::Camera;
 use crate::env::Environment;
@@ -303,6 +304,9 @@ pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
 /// tile has arrived, while the threads go on with other pixels; no thread waits on the disk
 /// while there is any pixel it can work on.
 pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &FrameOptions) -> Frame {
+    if tracer.pager().is_none() && opts.deadline.is_none() {
+        return render_in_core(r, tracer, frame);
+    }
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
     let mut order = tile_order(w, h);
     // Every other frame walks the pixels backward. When a frame needs more tiles than the
@@ -313,10 +317,6 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
         order.reverse();
     }
     let job_opts = JobOptions { chunk: 64, deadline: opts.deadline };
-    let run = jobs::run(tracer, order.len(), &job_opts, |i, caster| {
-        let p = order[i];
-        r.pixel(p % w, p / w, frame, caster)
-    });
     let n = (w * h) as usize;
     let aovs = r.settings.aovs;
     let mut f = Frame {
@@ -324,23 +324,119 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
         depth: if aovs { vec![0.0; n] } else { Vec::new() },
         normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
         albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
-        done: if run.stats.unfinished > 0 { vec![false; n] } else { Vec::new() },
+        done: Vec::new(),
         rays: 0,
-        jobs: run.stats,
+        jobs: JobStats::default(),
     };
-    for (&p, s) in order.iter().zip(run.results) {
-        let i = p as usize;
-        let Some(s) = s else { continue };
-        if !f.done.is_empty() {
-            f.done[i] = true;
+    // Jobs return 16 bytes a pixel without AOVs (the full sample with them): the results
+    // of a frame are rebuilt every frame, so they are kept small.
+    let mut finished: Vec<u32> = Vec::new();
+    if aovs {
+        let run = jobs::run(tracer, n, &job_opts, |i, caster| {
+            let p = order[i];
+            r.pixel(p % w, p / w, frame, caster)
+        });
+        f.jobs = run.stats;
+        for (i, s) in run.into_finished() {
+            let p = order[i] as usize;
+            finished.push(p as u32);
+            f.image.pixels[p] = s.radiance.to_array();
+            f.rays += s.rays as u64;
+            f.depth[p] = s.depth;
+            f.normal[p] = s.normal.to_array();
+            f.albedo[p] = s.albedo.to_array();
         }
-        f.image.pixels[i] = s.radiance.to_array();
-        f.rays += s.rays as u64;
-        if aovs {
-            f.depth[i] = s.depth;
-            f.normal[i] = s.normal.to_array();
-            f.albedo[i] = s.albedo.to_array();
+    } else {
+        let run = jobs::run(tracer, n, &job_opts, |i, caster| {
+            let p = order[i];
+            r.pixel(p % w, p / w, frame, caster).map(|s| (s.radiance.to_array(), s.rays))
+        });
+        f.jobs = run.stats;
+        let partial = f.jobs.unfinished > 0;
+        for (i, (rgb, rays)) in run.into_finished() {
+            let p = order[i] as usize;
+            if partial {
+                finished.push(p as u32);
+            }
+            f.image.pixels[p] = rgb;
+            f.rays += rays as u64;
+        }
+    }
+    if f.jobs.unfinished > 0 {
+        f.done = vec![false; n];
+        for p in finished {
+            f.done[p as usize] = true;
         }
     }
     f
+}
+
+/// The frame loop when nothing can suspend (an unpaged tracer, no deadline): 32x32 tiles as
+/// rayon tasks, each pixel straight through the tracer, with no job bookkeeping (about a
+/// third faster on frames of cheap pixels).
+fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
+    let (w, h) = (r.settings.camera.width, r.settings.camera.height);
+    let aovs = r.settings.aovs;
+    let tiles_x = w.div_ceil(TILE);
+    let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
+    // Per tile: its pixels in row order (and AOVs only when asked: the buffers are rebuilt
+    // every frame, so they are kept small).
+    let results: Vec<TileOut> = tiles
+        .par_iter()
+        .map(|&(tx, ty)| {
+            let mut caster = tracer;
+            let mut out = TileOut::default();
+            for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                    let s = r.pixel(x, y, frame, &mut caster).expect("a plain in-core Tracer never suspends");
+                    out.color.push(s.radiance.to_array());
+                    out.rays += s.rays as u64;
+                    if aovs {
+                        out.depth.push(s.depth);
+                        out.normal.push(s.normal.to_array());
+                        out.albedo.push(s.albedo.to_array());
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    let n = (w * h) as usize;
+    let mut f = Frame {
+        image: Image::new(w, h),
+        depth: if aovs { vec![0.0; n] } else { Vec::new() },
+        normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
+        albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
+        done: Vec::new(),
+        rays: 0,
+        jobs: JobStats::default(),
+    };
+    for ((tx, ty), t) in tiles.iter().zip(results) {
+        f.rays += t.rays;
+        let (x0, x1) = (tx * TILE, ((tx + 1) * TILE).min(w));
+        let tw = (x1 - x0) as usize;
+        for (row, y) in (ty * TILE..((ty + 1) * TILE).min(h)).enumerate() {
+            let dst = (y * w + x0) as usize..(y * w + x1) as usize;
+            let src = row * tw..(row + 1) * tw;
+            f.image.pixels[dst.clone()].copy_from_slice(&t.color[src.clone()]);
+            if aovs {
+                f.depth[dst.clone()].copy_from_slice(&t.depth[src.clone()]);
+                f.normal[dst.clone()].copy_from_slice(&t.normal[src.clone()]);
+                f.albedo[dst].copy_from_slice(&t.albedo[src]);
+            }
+        }
+    }
+    f.jobs.finished = n as u64;
+    f.jobs.rays = f.rays;
+    f
+}
+
+/// The pixels of one tile, row by row.
+#[derive(Default)]
+struct TileOut {
+    color: Vec<[f32; 3]>,
+    depth: Vec<f32>,
+    normal: Vec<[f32; 3]>,
+    albedo: Vec<[f32; 3]>,
+    rays: u64,
 }

@@ -18,12 +18,11 @@
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering::*};
-use std::sync::{Mutex, OnceLock};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use megaray_base::Ray;
 use megaray_scene::Scene;
-use rayon::prelude::*;
 
 use crate::{Hit, Pending, RayCaster, Suspended, Traced, Tracer};
 
@@ -60,10 +59,27 @@ pub struct JobStats {
     pub wait_secs: f64,
 }
 
-/// The results of [`run`]: one slot per job, `None` when it did not finish by the deadline.
+/// The results of [`run`]: the finished jobs' values, by job index, in no particular order
+/// (each thread's, as they finished).
 pub struct JobsResult<T> {
-    pub results: Vec<Option<T>>,
+    per_thread: Vec<Vec<(u32, T)>>,
     pub stats: JobStats,
+}
+
+impl<T> JobsResult<T> {
+    /// (job index, value) of every finished job, in no particular order.
+    pub fn into_finished(self) -> impl Iterator<Item = (usize, T)> {
+        self.per_thread.into_iter().flatten().map(|(i, v)| (i as usize, v))
+    }
+
+    /// One slot per job `0..n`, `None` where the job did not finish by the deadline.
+    pub fn into_ordered(self, n: usize) -> Vec<Option<T>> {
+        let mut out: Vec<Option<T>> = (0..n).map(|_| None).collect();
+        for (i, v) in self.into_finished() {
+            out[i] = Some(v);
+        }
+        out
+    }
 }
 
 /// One query a job made, in order.
@@ -89,12 +105,16 @@ impl<'t, 's> Replay<'t, 's> {
         Replay { tracer, log: Vec::new(), cursor: 0, waiting: None, rays: 0 }
     }
 
+    #[inline]
     fn restart(&mut self, log: Vec<Logged>) {
-        self.log = log;
+        if !(log.is_empty() && self.log.is_empty()) {
+            self.log = log;
+        }
         self.cursor = 0;
         self.waiting = None;
     }
 
+    #[inline]
     fn query(&mut self, ray: &Ray, any: bool) -> Result<Option<Hit>, Suspended> {
         if self.tracer.pager().is_none() {
             // Nothing can suspend: no log.
@@ -184,10 +204,9 @@ struct ParkLot {
 /// Runs jobs `0..n` on the current rayon pool; see the module documentation.
 pub fn run<T, F>(tracer: &Tracer, n: usize, opts: &JobOptions, job: F) -> JobsResult<T>
 where
-    T: Send + Sync,
+    T: Send,
     F: Fn(usize, &mut Replay) -> Result<T, Suspended> + Sync,
 {
-    let results: Vec<OnceLock<T>> = (0..n).map(|_| OnceLock::new()).collect();
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let lot = Mutex::new(ParkLot::default());
@@ -199,8 +218,10 @@ where
     let pager = tracer.pager();
     let lock = || lot.lock().unwrap_or_else(|p| p.into_inner());
 
-    // Runs job `i` with `log`; parks it if it suspends.
-    let attempt = |i: usize, log: Vec<Logged>, replay: &mut Replay| {
+    // Runs job `i` with `log` into `out`; parks it if it suspends. (Finished jobs are counted
+    // into `done` by the caller, a batch at a time: one shared counter bumped per job costs
+    // more than a cheap job.)
+    let attempt = |i: usize, log: Vec<Logged>, replay: &mut Replay, out: &mut Vec<(u32, T)>| {
         replay.restart(log);
         let r = {
             let _pin = pager.map(|p| p.pin());
@@ -208,8 +229,7 @@ where
         };
         match r {
             Ok(v) => {
-                let _ = results[i].set(v);
-                done.fetch_add(1, SeqCst);
+                out.push((i as u32, v));
                 None
             }
             Err(Suspended) => {
@@ -223,9 +243,13 @@ where
         }
     };
 
+    assert!(n <= u32::MAX as usize, "at most 2^32 - 1 jobs a run");
     let threads = rayon::current_num_threads().max(1);
-    (0..threads).into_par_iter().for_each(|_| {
+    // One worker loop on every thread of the pool (broadcast: a plain parallel iterator
+    // could run two loops one after the other on one thread).
+    let per_thread: Vec<Vec<(u32, T)>> = rayon::broadcast(|_| {
         let mut replay = Replay::new(tracer);
+        let mut out: Vec<(u32, T)> = Vec::with_capacity(n / threads + chunk);
         let mut to_park: Vec<(u32, Parked)> = Vec::new();
         let mut seen_arrivals = u64::MAX;
         // Set after a wait that saw no tile arrive: ask again for the tiles parked jobs wait
@@ -265,12 +289,13 @@ where
                     }
                 }
             }
-            let crowded = lock().count >= MAX_PARKED;
+            let crowded = pager.is_some() && lock().count >= MAX_PARKED;
+            let before = out.len();
             if ready.is_empty() && !crowded {
                 let start = next.fetch_add(chunk, SeqCst);
                 if start < n {
                     for i in start..(start + chunk).min(n) {
-                        if let Some(p) = attempt(i, Vec::new(), &mut replay) {
+                        if let Some(p) = attempt(i, Vec::new(), &mut replay, &mut out) {
                             to_park.push(p);
                         }
                     }
@@ -298,9 +323,12 @@ where
                 seen_arrivals = u64::MAX;
             }
             for job in ready {
-                if let Some(p) = attempt(job.index, job.log, &mut replay) {
+                if let Some(p) = attempt(job.index, job.log, &mut replay, &mut out) {
                     to_park.push(p);
                 }
+            }
+            if out.len() > before {
+                done.fetch_add(out.len() - before, SeqCst);
             }
             if !to_park.is_empty() {
                 let mut l = lock();
@@ -311,10 +339,9 @@ where
             }
         }
         rays.fetch_add(replay.rays, Relaxed);
+        out
     });
-
-    let results: Vec<Option<T>> = results.into_iter().map(|c| c.into_inner()).collect();
-    let finished = results.iter().filter(|r| r.is_some()).count() as u64;
+    let finished = per_thread.iter().map(|v| v.len() as u64).sum::<u64>();
     JobsResult {
         stats: JobStats {
             finished,
@@ -323,6 +350,6 @@ where
             rays: rays.load(Relaxed),
             wait_secs: wait_ns.load(Relaxed) as f64 * 1e-9,
         },
-        results,
+        per_thread,
     }
 }

@@ -357,12 +357,14 @@ impl<'s> Tracer<'s> {
 
     /// The closest hit of `ray` in `[ray.t_min, ray.t_max)`. On a paged tracer this waits
     /// for missing tiles (use [`Tracer::try_intersect`] not to).
+    #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         self.blocking(ray, false)
     }
 
     /// Whether anything lies on `ray` in `[ray.t_min, ray.t_max)`. On a paged tracer this
     /// waits for missing tiles (use [`Tracer::try_occluded`] not to).
+    #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
         self.blocking(ray, true).is_some()
     }
@@ -386,6 +388,7 @@ impl<'s> Tracer<'s> {
     }
 
     /// Traces to the end, waiting for missing tiles (pinned only while traversing).
+    #[inline]
     fn blocking(&self, ray: &Ray, any: bool) -> Option<Hit> {
         let Some(pager) = self.pager else {
             return match self.traverse(ray, any, None) {
