@@ -258,6 +258,20 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// A black `w` x `h` frame, with zeroed AOV buffers when `aovs`.
+    fn blank(w: u32, h: u32, aovs: bool) -> Frame {
+        let n = (w * h) as usize;
+        Frame {
+            image: Image::new(w, h),
+            depth: if aovs { vec![0.0; n] } else { Vec::new() },
+            normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
+            albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
+            done: Vec::new(),
+            rays: 0,
+            jobs: JobStats::default(),
+        }
+    }
+
     /// Whether pixel `i` (row-major) was finished.
     pub fn is_done(&self, i: usize) -> bool {
         self.done.get(i).copied().unwrap_or(true)
@@ -319,15 +333,7 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     let job_opts = JobOptions { chunk: 64, deadline: opts.deadline };
     let n = (w * h) as usize;
     let aovs = r.settings.aovs;
-    let mut f = Frame {
-        image: Image::new(w, h),
-        depth: if aovs { vec![0.0; n] } else { Vec::new() },
-        normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
-        albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
-        done: Vec::new(),
-        rays: 0,
-        jobs: JobStats::default(),
-    };
+    let mut f = Frame::blank(w, h, aovs);
     // Jobs return 16 bytes a pixel without AOVs (the full sample with them): the results
     // of a frame are rebuilt every frame, so they are kept small.
     let mut finished: Vec<u32> = Vec::new();
@@ -402,15 +408,7 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
         })
         .collect();
     let n = (w * h) as usize;
-    let mut f = Frame {
-        image: Image::new(w, h),
-        depth: if aovs { vec![0.0; n] } else { Vec::new() },
-        normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
-        albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
-        done: Vec::new(),
-        rays: 0,
-        jobs: JobStats::default(),
-    };
+    let mut f = Frame::blank(w, h, aovs);
     for ((tx, ty), t) in tiles.iter().zip(results) {
         f.rays += t.rays;
         let (x0, x1) = (tx * TILE, ((tx + 1) * TILE).min(w));
