@@ -12,8 +12,11 @@
 //! dropped from the first ray that differs), only slower.
 //!
 //! Threads wait only when every job left is parked; that time is [`JobStats::wait_secs`].
-//! At most [`MAX_PARKED`] jobs are parked at once (bounded memory: a parked job keeps a few
-//! hundred bytes); past that, threads retire parked jobs before taking new ones. With a
+//! At most [`MAX_PARKED`] jobs are parked at once; past that, threads retire parked jobs
+//! before taking new ones. A small cap keeps a frame's accesses together: with it, a frame
+//! that needs 3.4 times the memory budget re-read 1.1 times its working set instead of 2.1
+//! times (plant:300M, 1024x768, `--mem 2G`), at a small cost to cold frames that fit (fewer
+//! reads in flight). It also bounds memory (a parked job keeps a few hundred bytes). With a
 //! deadline, [`run`] returns when it passes and the jobs not finished are `None`.
 
 use std::collections::HashMap;
@@ -26,8 +29,8 @@ use megaray_scene::Scene;
 
 use crate::{Hit, Pending, RayCaster, Suspended, Traced, Tracer};
 
-/// The most jobs parked at once.
-pub const MAX_PARKED: usize = 1 << 16;
+/// The most jobs parked at once (see the module documentation for the choice).
+pub const MAX_PARKED: usize = 1 << 8;
 
 /// How to run jobs.
 #[derive(Clone, Copy, Debug)]
