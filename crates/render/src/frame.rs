@@ -330,7 +330,10 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     if r.passes.fetch_add(1, Ordering::Relaxed) % 2 == 1 {
         order.reverse();
     }
-    let job_opts = JobOptions { chunk: 64, deadline: opts.deadline };
+    // Against a deadline, race through the pixels whose tiles are resident; without one,
+    // keep the frame's accesses together (see `megaray_trace::jobs`).
+    let max_parked = if opts.deadline.is_some() { jobs::MAX_PARKED_DEADLINE } else { jobs::MAX_PARKED };
+    let job_opts = JobOptions { chunk: 64, deadline: opts.deadline, max_parked };
     let n = (w * h) as usize;
     let aovs = r.settings.aovs;
     let mut f = Frame::blank(w, h, aovs);
