@@ -244,3 +244,35 @@ fn render_with_a_budget_reports_a_corrupt_tile() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(!out.exists(), "no image is written from a damaged scene");
 }
+
+/// A model with attributes (spot: texture coordinates) under a budget of a few tiles: each
+/// slot maps to the tile that holds its attributes, and the picture equals the unbudgeted one.
+#[test]
+fn attributes_page_with_their_tiles() {
+    let dir = tempfile::tempdir().unwrap();
+    let (path, s) = build(dir.path(), &[model("spot.obj")], "spot", Some(1_500));
+    assert!(s.tiles >= 4, "only {} tiles", s.tiles);
+    let scene = Scene::open(&path).unwrap();
+    let mut parts_with = 0;
+    for (pi, p) in scene.parts().iter().enumerate() {
+        parts_with += scene.has_attributes(pi as u32) as u32;
+        for t in p.first_tile..p.first_tile + p.tile_count {
+            let e = &scene.tiles()[t as usize];
+            for slot in [e.first_slot, e.first_slot + 4 * e.blocks - 1] {
+                assert_eq!(scene.tile_of_slot(pi as u32, slot), Some(t), "part {pi} slot {slot}");
+            }
+        }
+        assert_eq!(scene.tile_of_slot(pi as u32, p.slot_count as u32), None);
+    }
+    assert!(parts_with > 0, "spot.obj's texture coordinates were not kept");
+    let p = path.to_str().unwrap();
+    let mem = (Pager::min_budget(&scene) + 8192).to_string();
+    drop(scene);
+    let (a, b) = (dir.path().join("a.png"), dir.path().join("b.png"));
+    let common = ["--res", "64x64", "--cam-offset", "0.3,0.3,0.9", "--threads", "3", "--shader", "auto"];
+    let (code, _, err) = run(&[&["render", p, "-o", a.to_str().unwrap()], &common[..]].concat());
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run(&[&["render", p, "-o", b.to_str().unwrap(), "--mem", &mem], &common[..]].concat());
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "the budgeted render differs");
+}

@@ -283,6 +283,22 @@ impl Scene {
         Some(out)
     }
 
+    /// The tile holding triangle slot `slot` of part `part` (its attributes are counted with
+    /// that tile's residency, see [`Scene::tile_ranges`]). `None` if there is no such slot.
+    pub fn tile_of_slot(&self, part: u32, slot: u32) -> Option<u32> {
+        let p = self.parts().get(part as usize)?;
+        let tiles = self.tiles().get(p.first_tile as usize..(p.first_tile + p.tile_count) as usize)?;
+        // A part's tiles hold consecutive slot ranges, in order.
+        let k = tiles.partition_point(|t| t.first_slot <= slot).checked_sub(1)?;
+        let t = &tiles[k];
+        (slot < t.first_slot + 4 * t.blocks).then_some(p.first_tile + k as u32)
+    }
+
+    /// Whether part `part` has any attribute array (normals, uvs, colours, materials).
+    pub fn has_attributes(&self, part: u32) -> bool {
+        self.parts().get(part as usize).is_some_and(|p| p.normals_off | p.uvs_off | p.colors_off | p.materials_off != 0)
+    }
+
     /// The byte ranges that stay resident while the scene is open: the header page and the
     /// tables (top-level tree, part and tile directories, materials).
     pub fn pinned_ranges(&self) -> Vec<(u64, u64)> {

@@ -125,6 +125,16 @@ impl<'t, 's> Replay<'t, 's> {
         self.waiting = None;
     }
 
+    /// The tile whose residency covers `h`'s attributes, if its part has any.
+    fn attribute_tile(&self, h: &Hit) -> Option<u32> {
+        let scene = self.tracer.scene();
+        if scene.has_attributes(h.part) {
+            scene.tile_of_slot(h.part, h.prim)
+        } else {
+            None
+        }
+    }
+
     #[inline]
     fn query(&mut self, ray: &Ray, any: bool) -> Result<Option<Hit>, Suspended> {
         if self.tracer.pager().is_none() {
@@ -136,8 +146,20 @@ impl<'t, 's> Replay<'t, 's> {
             let same = |r: &Ray| r.org == ray.org && r.dir == ray.dir && r.t_min == ray.t_min && r.t_max == ray.t_max;
             match &self.log[self.cursor] {
                 Logged::Hit(r, h) if !any && same(r) => {
+                    let h = *h;
+                    if let Some(t) = h.and_then(|h| self.attribute_tile(&h)) {
+                        // The hit came from an earlier run; its tile (which holds its
+                        // attributes, which the shader may read next) may have been evicted
+                        // since. Have it resident under this pin, or wait for it.
+                        if let Some(p) = self.tracer.pager() {
+                            if p.acquire(t) == megaray_page::Access::Missing {
+                                self.waiting = Some(t);
+                                return Err(Suspended);
+                            }
+                        }
+                    }
                     self.cursor += 1;
-                    return Ok(*h);
+                    return Ok(h);
                 }
                 Logged::Occluded(r, o) if any && same(r) => {
                     self.cursor += 1;
