@@ -648,6 +648,8 @@ pub struct DemoArgs {
     /// PNG exposure in stops (the sunlit white plant is brighter than 1 at 0).
     #[arg(long, value_name = "EV", default_value_t = -0.5, allow_hyphen_values = true)]
     exposure: f32,
+    #[command(flatten)]
+    paging: crate::paging::PagingArgs,
 }
 
 fn cache_dir(given: Option<PathBuf>) -> PathBuf {
@@ -702,6 +704,7 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     r.frames = Some(a.frames.max(1));
     r.light_samples = a.light_samples;
     r.exposure = a.exposure;
+    r.paging = a.paging;
     render(r, bars)?;
     println!("{}", png.display());
     Ok(())
