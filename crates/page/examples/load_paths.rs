@@ -11,7 +11,6 @@
 //! much larger than the page cache holds between runs for honest cold figures.
 
 use std::fs::File;
-use std::os::fd::AsRawFd;
 use std::os::unix::fs::FileExt;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -21,10 +20,7 @@ use megaray_scene::Scene;
 fn drop_cache(scene: &Scene, file: &File) {
     let len = scene.bytes().len() as u64;
     let _ = scene.release(0, len);
-    // SAFETY: posix_fadvise reads no memory of ours; the descriptor is open.
-    unsafe {
-        libc::posix_fadvise(file.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED);
-    }
+    megaray_page::drop_page_cache(file, 0, 0);
 }
 
 fn main() {

@@ -227,6 +227,23 @@ fn pages(len: u64, off: u64) -> u64 {
     (off + len).div_ceil(PAGE) * PAGE - off / PAGE * PAGE
 }
 
+/// The resident cost of each tile (its ranges widened to pages) and of the pinned tables.
+fn costs(scene: &Scene) -> (Vec<u64>, u64) {
+    let sum = |r: &[(u64, u64)]| r.iter().map(|&(o, l)| pages(l, o)).sum::<u64>();
+    let tiles = (0..scene.tiles().len() as u32).map(|t| sum(&scene.tile_ranges(t).unwrap_or_default())).collect();
+    (tiles, sum(&scene.pinned_ranges()))
+}
+
+/// Drops `len` bytes of `file` at `off` (0: to the end) from the page cache
+/// (posix_fadvise DONTNEED); pages mapped by a process stay.
+pub fn drop_page_cache(file: &File, off: u64, len: u64) {
+    // SAFETY: posix_fadvise only takes integers and a file descriptor that `file` keeps
+    // open; it reads no memory of ours.
+    unsafe {
+        libc::posix_fadvise(file.as_raw_fd(), off as libc::off_t, len as libc::off_t, libc::POSIX_FADV_DONTNEED);
+    }
+}
+
 impl Pager {
     /// Starts paging `scene` within `opts.budget` bytes: the pinned tables are made resident
     /// now, tiles when traversal first asks for them. Fails when the budget cannot hold the
@@ -237,10 +254,7 @@ impl Pager {
         let file = File::open(scene.path()).map_err(io)?;
         scene.advise_random().map_err(io)?;
         let n = scene.tiles().len();
-        let cost: Vec<u64> = (0..n as u32)
-            .map(|t| scene.tile_ranges(t).unwrap_or_default().iter().map(|&(o, l)| pages(l, o)).sum())
-            .collect();
-        let pinned: u64 = scene.pinned_ranges().iter().map(|&(o, l)| pages(l, o)).sum();
+        let (cost, pinned) = costs(&scene);
         let max_tile = cost.iter().copied().max().unwrap_or(0);
         let need = pinned + 2 * max_tile;
         if opts.budget < need {
@@ -312,12 +326,8 @@ impl Pager {
     /// The smallest budget [`Pager::new`] accepts for `scene`: its pinned tables plus two of
     /// its largest tiles.
     pub fn min_budget(scene: &Scene) -> u64 {
-        let pinned: u64 = scene.pinned_ranges().iter().map(|&(o, l)| pages(l, o)).sum();
-        let max_tile = (0..scene.tiles().len() as u32)
-            .map(|t| scene.tile_ranges(t).unwrap_or_default().iter().map(|&(o, l)| pages(l, o)).sum::<u64>())
-            .max()
-            .unwrap_or(0);
-        pinned + 2 * max_tile
+        let (cost, pinned) = costs(scene);
+        pinned + 2 * cost.iter().copied().max().unwrap_or(0)
     }
 
     /// The scene being paged.
@@ -633,16 +643,7 @@ impl Shared {
         self.releases[t as usize].fetch_add(1, SeqCst);
         for (o, l) in self.scene.tile_ranges(t).unwrap_or_default() {
             let _ = self.scene.release(o, l);
-            // SAFETY: posix_fadvise only takes integers and a file descriptor that `self.file`
-            // keeps open; it reads no memory of ours.
-            unsafe {
-                libc::posix_fadvise(
-                    self.file.as_raw_fd(),
-                    o as libc::off_t,
-                    l as libc::off_t,
-                    libc::POSIX_FADV_DONTNEED,
-                );
-            }
+            drop_page_cache(&self.file, o, l);
         }
     }
 }
