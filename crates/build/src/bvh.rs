@@ -1,9 +1,10 @@
 //! The in-core builder: a binned-SAH binary BVH over primitive boxes, then collapsed into a
-//! 4-wide BVH in a build layout ([`Bvh4`]). The same builder makes each part's tree (over
+//! 8-wide BVH in a build layout ([`Bvh`]). The same builder makes each part's tree (over
 //! triangles) and the top-level tree (over parts). Layout for the file is [`crate::tiles`]'s job.
 
 use glam::{Vec3, Vec4};
 use megaray_base::Aabb;
+use megaray_scene::format::NODE_WIDTH;
 
 /// Cost of one node traversal relative to one test of a block of four primitives.
 const C_TRAV: f32 = 1.0;
@@ -37,7 +38,7 @@ impl BNode {
     }
 }
 
-/// A child slot of a build-layout 4-wide node.
+/// A child slot of a build-layout 8-wide node.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kid {
     Empty,
@@ -49,17 +50,17 @@ pub enum Kid {
     },
 }
 
-/// A build-layout 4-wide node.
+/// A build-layout 8-wide node.
 #[derive(Clone, Copy, Debug)]
-pub struct Node4B {
-    pub bounds: [Aabb; 4],
-    pub kids: [Kid; 4],
+pub struct NodeB {
+    pub bounds: [Aabb; NODE_WIDTH],
+    pub kids: [Kid; NODE_WIDTH],
 }
 
-/// A 4-wide BVH in build layout: nodes in pre-order (children after their parent; node 0
+/// An 8-wide BVH in build layout: nodes in pre-order (children after their parent; node 0
 /// is the root) and the primitive order its leaves index.
-pub struct Bvh4 {
-    pub nodes: Vec<Node4B>,
+pub struct Bvh {
+    pub nodes: Vec<NodeB>,
     pub order: Vec<u32>,
     pub bounds: Aabb,
     pub depth: u32,
@@ -114,9 +115,9 @@ fn half_area(lo: Vec4, hi: Vec4) -> f32 {
     e.x * e.y + e.y * e.z + e.z * e.x
 }
 
-/// Builds a 4-wide BVH over primitives with the given boxes (centroids are box centres).
-pub fn build_bvh4(boxes: &[Aabb], cfg: BvhConfig) -> Bvh4 {
-    assert!(!boxes.is_empty(), "build_bvh4 needs at least one primitive");
+/// Builds an 8-wide BVH over primitives with the given boxes (centroids are box centres).
+pub fn build_bvh(boxes: &[Aabb], cfg: BvhConfig) -> Bvh {
+    assert!(!boxes.is_empty(), "build_bvh needs at least one primitive");
     let mut ext = Extent::EMPTY;
     let mut refs: Vec<PrimRef> = boxes
         .iter()
@@ -135,7 +136,7 @@ pub fn build_bvh4(boxes: &[Aabb], cfg: BvhConfig) -> Bvh4 {
     let bounds = *root.bounds();
     let mut nodes = Vec::new();
     let depth = collapse(&root, &mut nodes);
-    Bvh4 { nodes, order, bounds, depth }
+    Bvh { nodes, order, bounds, depth }
 }
 
 struct Ctx {
@@ -330,25 +331,25 @@ fn partition(v: &mut [PrimRef], pred: impl Fn(&PrimRef) -> bool) -> (usize, Exte
     (i, le, re)
 }
 
-/// Collapses the binary tree into 4-wide nodes (pre-order); returns the depth.
-fn collapse(root: &BNode, out: &mut Vec<Node4B>) -> u32 {
+/// Collapses the binary tree into 8-wide nodes (pre-order); returns the depth.
+fn collapse(root: &BNode, out: &mut Vec<NodeB>) -> u32 {
     match root {
         BNode::Leaf { bounds, start, count } => {
             // A tree that is a single leaf: a root node with one leaf child.
-            out.push(Node4B {
-                bounds: [*bounds, Aabb::EMPTY, Aabb::EMPTY, Aabb::EMPTY],
-                kids: [Kid::Leaf { start: *start, count: *count }, Kid::Empty, Kid::Empty, Kid::Empty],
-            });
+            let mut n = NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] };
+            n.bounds[0] = *bounds;
+            n.kids[0] = Kid::Leaf { start: *start, count: *count };
+            out.push(n);
             1
         }
         BNode::Inner { .. } => collapse_inner(root, out),
     }
 }
 
-fn collapse_inner(node: &BNode, out: &mut Vec<Node4B>) -> u32 {
+fn collapse_inner(node: &BNode, out: &mut Vec<NodeB>) -> u32 {
     let BNode::Inner { kids, .. } = node else { unreachable!() };
     let mut slots: Vec<&BNode> = vec![&kids[0], &kids[1]];
-    while slots.len() < 4 {
+    while slots.len() < NODE_WIDTH {
         // Open the inner child with the largest surface area.
         let pick = slots
             .iter()
@@ -362,7 +363,7 @@ fn collapse_inner(node: &BNode, out: &mut Vec<Node4B>) -> u32 {
         slots.insert(i + 1, &kids[1]);
     }
     let me = out.len();
-    out.push(Node4B { bounds: [Aabb::EMPTY; 4], kids: [Kid::Empty; 4] });
+    out.push(NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] });
     let mut depth = 0;
     for (k, s) in slots.iter().enumerate() {
         out[me].bounds[k] = *s.bounds();
@@ -395,7 +396,7 @@ mod tests {
         for _ in 0..100 {
             boxes.push(Aabb { min: [0.5; 3], max: [0.5; 3] }); // coincident centroids
         }
-        let b = build_bvh4(&boxes, BvhConfig { max_leaf: 4, parallel_above: 1000 });
+        let b = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 1000 });
         let mut seen = vec![0u32; boxes.len()];
         for n in &b.nodes {
             for (k, kid) in n.kids.iter().enumerate() {

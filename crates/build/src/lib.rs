@@ -12,7 +12,7 @@
 //!    midpoint when the SAH finds nothing) and route each triangle by its centroid into one of
 //!    up to 256 child files in one pass; children still too large are split again.
 //! 3. **Parts** ([`bvh`], [`tiles`]): each stream small enough is loaded and built in core
-//!    (binned SAH, collapsed to a 4-wide BVH), cut into page-aligned tiles and appended to the
+//!    (binned SAH, collapsed to an 8-wide BVH), cut into page-aligned tiles and appended to the
 //!    scene file with its attributes. Parts build in parallel, as many at once as threads, each
 //!    sized so that all of them fit `build_mem` together.
 //! 4. **Top level**: a BVH over the parts' boxes, written first in the file.
@@ -40,14 +40,14 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use megaray_base::{Aabb, Progress};
-use megaray_scene::format::{ChildRef, Node4, PackedNormals};
+use megaray_scene::format::{ChildRef, Node8, PackedNormals, NODE_WIDTH};
 use megaray_scene::{PartBlob, SceneWriter};
 
-use crate::bvh::{build_bvh4, BvhConfig, Kid};
+use crate::bvh::{build_bvh, BvhConfig, Kid};
 use crate::stream::{StreamFile, StreamReader, StreamTri};
 
 /// Estimated peak bytes per triangle of an in-core part build (stream records, boxes, the
-/// binary and 4-wide trees, the tiles and attribute arrays being assembled).
+/// binary and 8-wide trees, the tiles and attribute arrays being assembled).
 pub const INCORE_BYTES_PER_TRI: u64 = 256;
 /// Memory set aside from `build_mem` for I/O buffers and bookkeeping.
 pub const FIXED_RESERVE: u64 = 64 << 20;
@@ -268,14 +268,14 @@ pub fn build_scene(
 }
 
 /// The top-level tree over part boxes, in file layout; returns nodes and depth.
-pub fn top_level(boxes: &[Aabb]) -> (Vec<Node4>, u32) {
-    let bvh = build_bvh4(boxes, BvhConfig { max_leaf: 1, parallel_above: usize::MAX });
+pub fn top_level(boxes: &[Aabb]) -> (Vec<Node8>, u32) {
+    let bvh = build_bvh(boxes, BvhConfig { max_leaf: 1, parallel_above: usize::MAX });
     let nodes = bvh
         .nodes
         .iter()
         .map(|n| {
-            let mut out = Node4::EMPTY;
-            for k in 0..4 {
+            let mut out = Node8::EMPTY;
+            for k in 0..NODE_WIDTH {
                 let r = match n.kids[k] {
                     Kid::Empty => continue,
                     Kid::Inner(c) => ChildRef::inner(c),
@@ -334,7 +334,7 @@ fn build_part(
     Ok(blob)
 }
 
-/// Builds one part in core from triangles in memory: its 4-wide BVH, cut into tiles of
+/// Builds one part in core from triangles in memory: its 8-wide BVH, cut into tiles of
 /// about `tile_target` bytes (no attributes). Also returns, for each triangle slot in file
 /// order (4 per block), the index in `tris` of its triangle or [`tiles::PADDING`]. This is
 /// the in-core builder that `megaray bench` times.
@@ -346,7 +346,7 @@ pub fn build_in_core(tris: &[[[f32; 3]; 3]], tile_target: u32, parallel: bool) -
         tris.iter().map(|t| Aabb::from_points(t)).collect()
     };
     let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX } };
-    let bvh = build_bvh4(&boxes, cfg);
+    let bvh = build_bvh(&boxes, cfg);
     drop(boxes);
     let tiled = tiles::tile_part(&bvh, tris, tile_target as u64);
     let blob = PartBlob {

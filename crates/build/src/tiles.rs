@@ -1,15 +1,15 @@
-//! Cutting a part's 4-wide BVH into tiles: the conversion from build layout to file layout.
+//! Cutting a part's 8-wide BVH into tiles: the conversion from build layout to file layout.
 //!
 //! A tile holds whole subtrees where it can. Subtrees of at most `target` bytes (nodes at
-//! 128 bytes, leaves at 144 bytes per started block of four triangles) are *units*: a unit is never split across tiles. Nodes above
+//! 256 bytes, leaves at 144 bytes per started block of four triangles) are *units*: a unit is never split across tiles. Nodes above
 //! the units stand alone. Walking the tree depth-first, units and lone nodes are packed into
 //! tiles next-fit, so a tile holds neighbouring geometry. Inside a tile, nodes keep depth-first
 //! order (children after parents); a child in another tile is reached through a link.
 
-use megaray_scene::format::{ChildRef, Node4, Tri4};
+use megaray_scene::format::{ChildRef, Node8, Tri4, NODE_BYTES};
 use megaray_scene::TileBlob;
 
-use crate::bvh::{Bvh4, Kid};
+use crate::bvh::{Bvh, Kid};
 
 /// The tiles of one part.
 pub struct Tiled {
@@ -31,12 +31,12 @@ fn leaf_bytes(count: u32) -> u64 {
 }
 
 /// Lays out `bvh` (whose leaves index `tris` through `bvh.order`) in tiles of about `target` bytes.
-pub fn tile_part(bvh: &Bvh4, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
+pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
     let nodes = &bvh.nodes;
     // Subtree sizes, bottom-up (children have larger indices than their parent).
     let mut size = vec![0u64; nodes.len()];
     for i in (0..nodes.len()).rev() {
-        let mut s = 128u64;
+        let mut s = NODE_BYTES as u64;
         for kid in nodes[i].kids {
             s += match kid {
                 Kid::Inner(c) => size[c as usize],
@@ -47,7 +47,7 @@ pub fn tile_part(bvh: &Bvh4, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
         size[i] = s;
     }
     let own = |i: usize| -> u64 {
-        128 + nodes[i]
+        NODE_BYTES as u64 + nodes[i]
             .kids
             .iter()
             .map(|k| if let Kid::Leaf { count, .. } = k { leaf_bytes(*count) } else { 0 })
@@ -103,7 +103,7 @@ pub fn tile_part(bvh: &Bvh4, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
     for (t, list) in tile_nodes.iter().enumerate() {
         let mut blob = TileBlob { nodes: Vec::with_capacity(list.len()), blocks: Vec::new() };
         for &n in list {
-            let mut out = Node4::EMPTY;
+            let mut out = Node8::EMPTY;
             for (k, kid) in nodes[n as usize].kids.iter().enumerate() {
                 let r = match *kid {
                     Kid::Empty => continue,

@@ -552,7 +552,7 @@ pub fn info(a: InfoArgs) -> Result<()> {
     let parts = scene.parts();
     let tiles = scene.tiles();
     let n = h.tri_count.max(1) as f64;
-    let node_bytes: u64 = tiles.iter().map(|t| t.node_count as u64 * 128).sum();
+    let node_bytes: u64 = tiles.iter().map(|t| t.node_count as u64 * megaray_scene::format::NODE_BYTES as u64).sum();
     let tri_bytes: u64 = tiles.iter().map(|t| t.blocks as u64 * 144).sum();
     let slots: u64 = parts.iter().map(|p| p.slot_count).sum();
     let fill = h.tri_count as f64 / slots.max(1) as f64;

@@ -10,7 +10,7 @@ use megaray_base::Aabb;
 /// The first eight bytes of every scene file.
 pub const MAGIC: [u8; 8] = *b"MRAYSCN\x1a";
 /// The format version this code writes and reads.
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 /// Page size: tiles and sections start on multiples of it.
 pub const PAGE: u64 = 4096;
 /// Bytes of the header page (the header struct is followed by zeros up to it).
@@ -37,7 +37,7 @@ pub const ATTR_MATERIAL: u32 = 8;
 /// | 68..72 | `tile_count` |
 /// | 72..76 | `tile_target`: the tile size the build aimed at, bytes |
 /// | 76..80 | `attr_flags`: `ATTR_*` bits |
-/// | 80..88 | `top_nodes_off`: offset of the top-level tree ([`Node4`] array) |
+/// | 80..88 | `top_nodes_off`: offset of the top-level tree ([`Node8`] array, page aligned) |
 /// | 88..92 | `top_node_count` |
 /// | 92..96 | `top_depth`: depth of the top-level tree (root = 1) |
 /// | 96..104 | `parts_off`: offset of the part directory ([`PartEntry`] array) |
@@ -78,33 +78,39 @@ pub struct Header {
 }
 const _: () = assert!(std::mem::size_of::<Header>() == 256);
 
-/// A 4-wide BVH node: the boxes of its four children (structure of arrays, so one SIMD
-/// register holds one coordinate of all four) and their [`ChildRef`]s. 128 bytes, two cache
-/// lines, 64-byte aligned in the file. Unused slots have an empty box (`lo = +inf`,
-/// `hi = -inf`) and the child [`ChildRef::EMPTY`].
+/// Children per BVH node.
+pub const NODE_WIDTH: usize = 8;
+/// Bytes of a [`Node8`].
+pub const NODE_BYTES: usize = 256;
+
+/// An 8-wide BVH node: the boxes of its eight children (structure of arrays, so one 8-wide
+/// SIMD register, or two 4-wide ones, holds one plane of all eight) and their [`ChildRef`]s.
+/// 256 bytes, four cache lines, 256-byte aligned in the file (node arrays start on pages).
+/// Unused slots have an empty box (`lo = +inf`, `hi = -inf`) and the child
+/// [`ChildRef::EMPTY`].
 #[repr(C, align(64))]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct Node4 {
-    pub lo_x: [f32; 4],
-    pub hi_x: [f32; 4],
-    pub lo_y: [f32; 4],
-    pub hi_y: [f32; 4],
-    pub lo_z: [f32; 4],
-    pub hi_z: [f32; 4],
-    pub child: [u64; 4],
+pub struct Node8 {
+    pub lo_x: [f32; NODE_WIDTH],
+    pub hi_x: [f32; NODE_WIDTH],
+    pub lo_y: [f32; NODE_WIDTH],
+    pub hi_y: [f32; NODE_WIDTH],
+    pub lo_z: [f32; NODE_WIDTH],
+    pub hi_z: [f32; NODE_WIDTH],
+    pub child: [u64; NODE_WIDTH],
 }
-const _: () = assert!(std::mem::size_of::<Node4>() == 128);
+const _: () = assert!(std::mem::size_of::<Node8>() == NODE_BYTES);
 
-impl Node4 {
-    /// A node with four empty slots.
-    pub const EMPTY: Node4 = Node4 {
-        lo_x: [f32::INFINITY; 4],
-        hi_x: [f32::NEG_INFINITY; 4],
-        lo_y: [f32::INFINITY; 4],
-        hi_y: [f32::NEG_INFINITY; 4],
-        lo_z: [f32::INFINITY; 4],
-        hi_z: [f32::NEG_INFINITY; 4],
-        child: [ChildRef::EMPTY.0; 4],
+impl Node8 {
+    /// A node with eight empty slots.
+    pub const EMPTY: Node8 = Node8 {
+        lo_x: [f32::INFINITY; NODE_WIDTH],
+        hi_x: [f32::NEG_INFINITY; NODE_WIDTH],
+        lo_y: [f32::INFINITY; NODE_WIDTH],
+        hi_y: [f32::NEG_INFINITY; NODE_WIDTH],
+        lo_z: [f32::INFINITY; NODE_WIDTH],
+        hi_z: [f32::NEG_INFINITY; NODE_WIDTH],
+        child: [ChildRef::EMPTY.0; NODE_WIDTH],
     };
 
     /// Sets slot `i` to `child` with bounds `b`.
@@ -118,13 +124,20 @@ impl Node4 {
         self.child[i] = child.0;
     }
 
+    /// The node as eight 32-byte rows: rows 0..6 are `lo_x, hi_x, lo_y, hi_y, lo_z, hi_z`
+    /// (row `2 * axis` the low planes, `2 * axis + 1` the high ones), rows 6..8 the children.
+    #[inline(always)]
+    pub fn planes(&self) -> &[[f32; NODE_WIDTH]; 8] {
+        bytemuck::cast_ref(self)
+    }
+
     /// The bounds of slot `i`.
     pub fn bounds(&self, i: usize) -> Aabb {
         Aabb { min: [self.lo_x[i], self.lo_y[i], self.lo_z[i]], max: [self.hi_x[i], self.hi_y[i], self.hi_z[i]] }
     }
 }
 
-/// A reference from a [`Node4`] slot to a child: one tagged 64-bit integer.
+/// A reference from a [`Node8`] slot to a child: one tagged 64-bit integer.
 ///
 /// | bits 63..62 | meaning | payload |
 /// |---|---|---|
@@ -257,8 +270,8 @@ const _: () = assert!(std::mem::size_of::<PartEntry>() == 128);
 
 /// A tile directory entry. 40 bytes.
 ///
-/// A tile is the unit of paging: a page-aligned block holding `node_count` [`Node4`]s and
-/// then `blocks` [`Tri4`]s (`bytes = 128 * node_count + 144 * blocks`). Its nodes refer
+/// A tile is the unit of paging: a page-aligned block holding `node_count` [`Node8`]s and
+/// then `blocks` [`Tri4`]s (`bytes = 256 * node_count + 144 * blocks`). Its nodes refer
 /// to each other by index, to its own blocks, and to other tiles through links.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]

@@ -4,14 +4,14 @@
 //!
 //! ```text
 //! page 0        Header (magic, version, counts, bounds, offsets, checksums)
-//! page 1..      top-level tree (Node4 array) and part directory (PartEntry array)
-//! then          for each part: its tiles (page-aligned blocks of Node4s then Tris),
+//! page 1..      top-level tree (Node8 array) and part directory (PartEntry array)
+//! then          for each part: its tiles (page-aligned blocks of Node8s then Tris),
 //!               then its attribute arrays (normals, uvs, colours, material ids)
-//!               (tiles: Node4s, then Tri4 blocks of four triangles each)
+//!               (tiles: Node8s, then Tri4 blocks of four triangles each)
 //! then          tile directory (TileEntry array), material table
 //! ```
 //!
-//! The top-level tree's leaves name parts; each part is a 4-wide BVH cut into tiles of
+//! The top-level tree's leaves name parts; each part is an 8-wide BVH cut into tiles of
 //! about [`Header::tile_target`] bytes, the unit that paging loads and evicts. Nodes refer
 //! to nodes of their own tile by index and to other tiles by links, so traversal knows
 //! exactly when it is about to enter a tile. `docs/FORMAT.md` gives every byte.
@@ -30,6 +30,6 @@ pub mod reader;
 pub mod writer;
 
 pub use error::{SceneError, SceneErrorKind};
-pub use format::{Child, ChildRef, Header, Node4, PartEntry, TileEntry, Tri4};
+pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
 pub use reader::{Scene, Tile};
 pub use writer::{MaterialDesc, PartBlob, SceneWriter, TileBlob};

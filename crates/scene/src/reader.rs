@@ -30,7 +30,7 @@ pub struct Scene {
 /// The nodes and triangle blocks of one tile.
 #[derive(Clone, Copy)]
 pub struct Tile<'a> {
-    pub nodes: &'a [Node4],
+    pub nodes: &'a [Node8],
     pub blocks: &'a [Tri4],
 }
 
@@ -106,8 +106,8 @@ impl Scene {
             ));
         }
         let bad = |what: &str| SceneError::corrupt(path, what.to_string());
-        let top = range(header.top_nodes_off, header.top_node_count as u64 * 128, len)
-            .filter(|_| header.top_nodes_off.is_multiple_of(64) && header.top_node_count > 0)
+        let top = range(header.top_nodes_off, header.top_node_count as u64 * NODE_BYTES as u64, len)
+            .filter(|_| header.top_nodes_off.is_multiple_of(NODE_BYTES as u64) && header.top_node_count > 0)
             .ok_or_else(|| bad("top-level tree lies outside the file"))?;
         let parts = range(header.parts_off, header.part_count as u64 * 128, len)
             .filter(|_| header.parts_off.is_multiple_of(8) && header.part_count > 0)
@@ -179,7 +179,7 @@ impl Scene {
             return Err(bad(format!("parts hold {tri_total} triangles, header says {}", h.tri_count)));
         }
         for (i, t) in tiles.iter().enumerate() {
-            let expect = t.node_count as u64 * 128 + t.blocks as u64 * 144;
+            let expect = t.node_count as u64 * NODE_BYTES as u64 + t.blocks as u64 * 144;
             let part = self.parts().get(t.part as usize);
             if !t.offset.is_multiple_of(PAGE)
                 || t.bytes as u64 != expect
@@ -211,14 +211,31 @@ impl Scene {
     }
 
     /// The top-level tree; node 0 is the root.
-    pub fn top_nodes(&self) -> &[Node4] {
+    pub fn top_nodes(&self) -> &[Node8] {
         let off = self.header.top_nodes_off as usize;
-        bytemuck::cast_slice(&self.map[off..off + self.header.top_node_count as usize * 128])
+        bytemuck::cast_slice(&self.map[off..off + self.header.top_node_count as usize * NODE_BYTES])
     }
 
     pub fn parts(&self) -> &[PartEntry] {
         let off = self.header.parts_off as usize;
         bytemuck::cast_slice(&self.map[off..off + self.header.part_count as usize * 128])
+    }
+
+    /// The whole file as an array of [`Node8`]s, 256-byte units from byte 0 (a tail shorter
+    /// than one is left out). Every node array in the file starts on a multiple of 256 bytes
+    /// (the top-level tree: checked by [`Scene::open`]; tiles: page aligned), so node `i` of a
+    /// tile at byte `offset` is `node_pool()[offset / 256 + i]`. The tracer indexes this one
+    /// slice instead of making a slice per tile it enters.
+    #[inline]
+    pub fn node_pool(&self) -> &[Node8] {
+        bytemuck::cast_slice(&self.map[..self.map.len() / NODE_BYTES * NODE_BYTES])
+    }
+
+    /// The whole file as 16-byte units (`[f32; 4]`), in which a [`Tri4`] block at byte `b` (a
+    /// multiple of 16) is the nine units from `b / 16`. The tracer reads blocks through it.
+    #[inline]
+    pub fn vec4_pool(&self) -> &[[f32; 4]] {
+        bytemuck::cast_slice(&self.map[..self.map.len() / 16 * 16])
     }
 
     pub fn tiles(&self) -> &[TileEntry] {
@@ -305,7 +322,7 @@ impl Scene {
         let h = &self.header;
         vec![
             (0, PAGE),
-            (h.top_nodes_off, h.top_node_count as u64 * 128),
+            (h.top_nodes_off, h.top_node_count as u64 * NODE_BYTES as u64),
             (h.parts_off, h.part_count as u64 * 128),
             (h.tiles_off, h.tile_count as u64 * 40),
             (h.materials_off, h.materials_bytes),
@@ -354,7 +371,7 @@ impl Scene {
 
     fn tile_unchecked_view(&self, t: u32) -> Tile<'_> {
         let e = &self.tiles()[t as usize];
-        let nodes_end = e.offset as usize + e.node_count as usize * 128;
+        let nodes_end = e.offset as usize + e.node_count as usize * NODE_BYTES;
         let blocks_end = nodes_end + e.blocks as usize * 144;
         Tile {
             nodes: bytemuck::cast_slice(&self.map[e.offset as usize..nodes_end]),

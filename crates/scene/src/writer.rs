@@ -15,14 +15,14 @@ use crate::format::*;
 /// One tile as the builder produces it.
 #[derive(Clone, Debug, Default)]
 pub struct TileBlob {
-    pub nodes: Vec<Node4>,
+    pub nodes: Vec<Node8>,
     pub blocks: Vec<Tri4>,
 }
 
 impl TileBlob {
     /// Bytes of the tile's payload (nodes then triangle blocks), without page padding.
     pub fn bytes(&self) -> u64 {
-        (self.nodes.len() * 128 + self.blocks.len() * 144) as u64
+        (self.nodes.len() * NODE_BYTES + self.blocks.len() * 144) as u64
     }
 }
 
@@ -75,7 +75,7 @@ pub struct SceneWriter {
     tiles: Vec<TileEntry>,
     tri_count: u64,
     tile_target: u32,
-    top_nodes: Vec<Node4>,
+    top_nodes: Vec<Node8>,
     top_depth: u32,
     top_off: u64,
     parts_off: u64,
@@ -91,7 +91,7 @@ impl SceneWriter {
     /// `Part` references name the `part_count` parts to come.
     pub fn create(
         path: &Path,
-        top_nodes: Vec<Node4>,
+        top_nodes: Vec<Node8>,
         top_depth: u32,
         part_count: u32,
         tile_target: u32,
@@ -101,7 +101,7 @@ impl SceneWriter {
         let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
         let file = File::create(&tmp).map_err(|e| SceneError::io(path, "create", &e))?;
         let top_off = HEADER_PAGE;
-        let parts_off = top_off + (top_nodes.len() * 128) as u64;
+        let parts_off = top_off + (top_nodes.len() * NODE_BYTES) as u64;
         let cursor = page_up(parts_off + part_count as u64 * 128);
         let mut w = SceneWriter {
             path: path.to_path_buf(),

@@ -1,7 +1,7 @@
 //! # megaray-trace: rays through a scene file
 //!
 //! [`Tracer`] walks the two-level tree of a memory-mapped [`Scene`]: the top-level tree over
-//! parts, then each part's 4-wide BVH, crossing from tile to tile through links. Every tile is
+//! parts, then each part's 8-wide BVH, crossing from tile to tile through links. Every tile is
 //! checked the first time it is entered (see [`Scene::tile`]); a corrupt tile is skipped and
 //! reported through [`Scene::first_error`], never read as garbage.
 //!
@@ -26,8 +26,8 @@ pub mod stats;
 use glam::Vec4;
 use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
 use megaray_page::{Access, Pager};
-use megaray_scene::format::{Child, ChildRef, Node4, Tri4};
-use megaray_scene::{PartEntry, Scene, Tile, TileEntry};
+use megaray_scene::format::{ChildRef, Node8, NODE_BYTES, NODE_WIDTH};
+use megaray_scene::{PartEntry, Scene, TileEntry};
 
 /// A closest hit.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -95,20 +95,90 @@ const STACK: usize = 32;
 /// watertight triangle test would find (Ize 2013: 1 + 2 gamma(3)).
 const BOX_EPS: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
+/// A traversal stack entry: something to visit, and the entry distance of its box.
 #[derive(Clone, Copy, Debug)]
 struct Entry {
+    /// A [`ChildRef`]: an inner node or a leaf of node array `arr`, a link, or a part.
+    r: u64,
+    /// The node array `r` is relative to: [`TOP`] or a tile.
     arr: u32,
-    node: u32,
+    /// Entry distance of its box along the ray.
     t: f32,
 }
 
-/// Precomputed per-ray values for box tests: the four slots of a [`Node4`] are tested at
-/// once with 4-wide vectors (`glam::Vec4`, SSE on x86-64), near and far planes chosen once
-/// per ray from the direction's signs.
+impl Entry {
+    /// The root of the top-level tree.
+    const ROOT: Entry = Entry { r: 0, arr: TOP, t: f32::NEG_INFINITY };
+}
+
+/// The traversal stack: [`STACK`] entries on the machine stack, then a heap spill (only for
+/// pathologically deep trees: which entries spill does not matter for correctness).
+struct Stack<'a> {
+    fixed: &'a mut [Entry; STACK],
+    sp: usize,
+    spill: Vec<Entry>,
+}
+
+impl Stack<'_> {
+    #[inline(always)]
+    fn new(fixed: &mut [Entry; STACK]) -> Stack<'_> {
+        Stack { fixed, sp: 0, spill: Vec::new() }
+    }
+
+    #[inline(always)]
+    fn push(&mut self, e: Entry) {
+        if self.sp < STACK {
+            self.fixed[self.sp] = e;
+            self.sp += 1;
+        } else {
+            self.spill.push(e);
+        }
+    }
+
+    #[inline(always)]
+    fn pop(&mut self) -> Option<Entry> {
+        if self.sp > 0 {
+            self.sp -= 1;
+            Some(self.fixed[self.sp])
+        } else {
+            self.spill.pop()
+        }
+    }
+
+    /// The entries, bottom first (for [`Pending`]).
+    fn take_all(&mut self) -> Vec<Entry> {
+        let mut v = std::mem::take(&mut self.spill);
+        v.extend_from_slice(&self.fixed[..self.sp]);
+        v
+    }
+}
+
+/// What a popped [`Entry`] turned out to be, its tile opened.
+enum Step<'a> {
+    /// An inner node to test, in node array `arr`.
+    Node(&'a Node8, u32),
+    /// A leaf: `count` triangles from block `first` of the open tile.
+    Leaf { first: u32, count: u32 },
+    /// Nothing to visit (an empty slot, a corrupt tile).
+    Skip,
+    /// Its tile is not resident (it has been requested).
+    Missing(u32),
+}
+
+/// Lanes of a node's box test.
+const W: usize = NODE_WIDTH;
+
+/// Precomputed per-ray values for box tests: the eight slots of a [`Node8`] are tested at
+/// once, written as plain loops over the eight lanes that the compiler turns into SIMD (two
+/// 4-wide SSE operations on the baseline target). The near and far planes of each axis are
+/// chosen once per ray from the direction's signs, as indices into the node's six plane rows
+/// (`lo_x, hi_x, lo_y, hi_y, lo_z, hi_z`), so the test has no branches.
 struct RayBox {
-    org: [Vec4; 3],
-    inv: [Vec4; 3],
-    neg: [bool; 3],
+    org: [f32; 3],
+    inv: [f32; 3],
+    /// Per axis: the row ([`Node8::planes`]) of the near plane; the far plane is the other
+    /// one of the pair (`near ^ 1`).
+    near: [usize; 3],
 }
 
 impl RayBox {
@@ -118,36 +188,77 @@ impl RayBox {
         let fix = |d: f32| d.abs().max(1e-20).copysign(d);
         let inv = [1.0 / fix(r.dir.x), 1.0 / fix(r.dir.y), 1.0 / fix(r.dir.z)];
         RayBox {
-            org: [Vec4::splat(r.org.x), Vec4::splat(r.org.y), Vec4::splat(r.org.z)],
-            inv: inv.map(Vec4::splat),
-            neg: inv.map(|i| i < 0.0),
+            org: r.org.into(),
+            inv,
+            near: [(inv[0] < 0.0) as usize, 2 + (inv[1] < 0.0) as usize, 4 + (inv[2] < 0.0) as usize],
         }
     }
 
-    /// Entry distances of the four slots and a bit mask of the slots the ray enters
+    /// Entry distances of the eight slots and a bit mask of the slots the ray enters
     /// within `[t0, t1]`.
     #[inline(always)]
-    fn test(&self, n: &Node4, t0: f32, t1: f32) -> ([f32; 4], u32) {
-        // Near and far planes chosen by the direction's sign (the same for every node).
-        let slab = |lo: &[f32; 4], hi: &[f32; 4], k: usize| {
-            let (near, far) = if self.neg[k] { (hi, lo) } else { (lo, hi) };
-            (
-                (Vec4::from_array(*near) - self.org[k]) * self.inv[k],
-                (Vec4::from_array(*far) - self.org[k]) * self.inv[k],
-            )
+    fn test(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
+        let planes = n.planes();
+        // `& 7`: in range by construction, and the compiler sees it.
+        let row = |k: usize, far: usize| &planes[(self.near[k] ^ far) & 7];
+        let (nx, ny, nz) = (row(0, 0), row(1, 0), row(2, 0));
+        let (fx, fy, fz) = (row(0, 1), row(1, 1), row(2, 1));
+        let o = self.org.map(Vec4::splat);
+        let inv = self.inv.map(Vec4::splat);
+        let (t0, t1) = (Vec4::splat(t0), Vec4::splat(t1));
+        // Slots 0..4, then 4..8: one 4-wide half at a time.
+        let half = |h: usize| {
+            let q = |r: &[f32; W], k: usize| (Vec4::from_slice(&r[4 * h..4 * h + 4]) - o[k]) * inv[k];
+            let tn = q(nx, 0).max(q(ny, 1)).max(q(nz, 2)).max(t0);
+            // Both the box's exit and the current closest hit are widened: a box's entry
+            // distance may round up past the distance of a hit inside it.
+            let tf = q(fx, 0).min(q(fy, 1)).min(q(fz, 2)).min(t1) * BOX_EPS;
+            (tn, tn.cmple(tf).bitmask())
         };
-        let (nx, fx) = slab(&n.lo_x, &n.hi_x, 0);
-        let (ny, fy) = slab(&n.lo_y, &n.hi_y, 1);
-        let (nz, fz) = slab(&n.lo_z, &n.hi_z, 2);
-        let near = nx.max(ny).max(nz).max(Vec4::splat(t0));
-        // Both the box's exit and the current closest hit are widened: a box's entry distance
-        // may round up past the distance of a hit inside it.
-        let far = fx.min(fy).min(fz).min(Vec4::splat(t1)) * BOX_EPS;
-        (near.to_array(), near.cmple(far).bitmask())
+        let (n0, m0) = half(0);
+        let (n1, m1) = half(1);
+        let mut near = [0f32; W];
+        near[..4].copy_from_slice(&n0.to_array());
+        near[4..].copy_from_slice(&n1.to_array());
+        (near, m0 | (m1 << 4))
     }
 }
 
-/// Per-ray constants of the 4-wide watertight test (the lanes of a [`Tri4`] block at once).
+/// `min` as `minps` computes it (the second operand when either is NaN), so that loops of it
+/// vectorize.
+#[inline(always)]
+fn fmin(a: f32, b: f32) -> f32 {
+    if a < b {
+        a
+    } else {
+        b
+    }
+}
+
+/// `max` as `maxps` computes it.
+#[inline(always)]
+fn fmax(a: f32, b: f32) -> f32 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// A [`Tri4`](megaray_scene::format::Tri4) block as the tracer reads it from [`Scene::vec4_pool`]: its `v`.
+type Block = [[f32; 4]; 9];
+
+/// The corners of the triangle in `lane` of a block (as `Tri4::tri`).
+#[inline]
+fn corners(v: &Block, lane: usize) -> [[f32; 3]; 3] {
+    [
+        [v[0][lane], v[1][lane], v[2][lane]],
+        [v[3][lane], v[4][lane], v[5][lane]],
+        [v[6][lane], v[7][lane], v[8][lane]],
+    ]
+}
+
+/// Per-ray constants of the 4-wide watertight test (the lanes of a [`Block`] at once).
 /// Each lane computes exactly what [`WatertightRay::intersect`] computes, operation for
 /// operation, so results are bit-identical to the scalar reference.
 struct RayTri4 {
@@ -171,11 +282,11 @@ impl RayTri4 {
 
     /// The nearest hit among the lanes of `b` set in `lanes`, in `[t_min, t_max)`.
     #[inline(always)]
-    fn test(&self, b: &Tri4, lanes: u32, t_max: f32) -> Option<(usize, TriHit)> {
+    fn test(&self, b: &Block, lanes: u32, t_max: f32) -> Option<(usize, TriHit)> {
         let [kx, ky, kz] = self.wt.k;
         let [ox, oy, oz] = self.o;
         let [sx, sy, sz] = self.s;
-        let v = |c: usize, k: usize| Vec4::from_array(b.v[3 * c + k]);
+        let v = |c: usize, k: usize| Vec4::from_array(b[3 * c + k]);
         let az = v(0, kz) - oz;
         let bz = v(1, kz) - oz;
         let cz = v(2, kz) - oz;
@@ -221,11 +332,11 @@ impl RayTri4 {
     }
 
     /// The reference test lane by lane.
-    fn scalar(&self, b: &Tri4, lanes: u32, mut t_max: f32) -> Option<(usize, TriHit)> {
+    fn scalar(&self, b: &Block, lanes: u32, mut t_max: f32) -> Option<(usize, TriHit)> {
         let mut best = None;
         for lane in 0..4 {
             if lanes & (1 << lane) != 0 {
-                if let Some(h) = self.wt.intersect(&b.tri(lane), t_max) {
+                if let Some(h) = self.wt.intersect(&corners(b, lane), t_max) {
                     t_max = h.t;
                     best = Some((lane, h));
                 }
@@ -249,9 +360,14 @@ pub struct Tracer<'s> {
     scene: &'s Scene,
     pager: Option<&'s Pager>,
     // The scene's tables, looked up once rather than at every tile crossing.
-    top: &'s [Node4],
     parts: &'s [PartEntry],
     tiles: &'s [TileEntry],
+    /// The file as nodes and as 16-byte units ([`Scene::node_pool`], [`Scene::vec4_pool`]):
+    /// entering a tile sets two base indices into these instead of slicing the map.
+    nodes: &'s [Node8],
+    vec4: &'s [[f32; 4]],
+    /// Index of the top-level tree's first node in `nodes`.
+    top_base: usize,
 }
 
 /// A ray whose traversal stopped at a tile that is not resident: its stack and best hit so
@@ -280,26 +396,30 @@ pub enum Traced {
     Pending(Pending),
 }
 
-/// What opening a tile gave.
-#[derive(PartialEq)]
-enum Open {
-    Ready,
-    Skip,
-    Missing,
-}
-
-/// Traversal state kept between node visits: the tile currently open.
-struct Cursor<'s> {
+/// Traversal state kept between node visits: the node array currently open.
+#[derive(Clone, Copy)]
+struct Cursor {
+    /// [`TOP`] or a tile.
     arr: u32,
-    nodes: &'s [Node4],
-    tile: Option<Tile<'s>>,
+    /// Index of the array's node 0 in [`Tracer::nodes`].
+    node_base: usize,
+    /// Index of the tile's block 0 in [`Tracer::vec4`] (9 units per block).
+    block_base: usize,
     part: u32,
     first_slot: u32,
 }
 
 impl<'s> Tracer<'s> {
     pub fn new(scene: &'s Scene) -> Tracer<'s> {
-        Tracer { scene, pager: None, top: scene.top_nodes(), parts: scene.parts(), tiles: scene.tiles() }
+        Tracer {
+            scene,
+            pager: None,
+            parts: scene.parts(),
+            tiles: scene.tiles(),
+            nodes: scene.node_pool(),
+            vec4: scene.vec4_pool(),
+            top_base: scene.header().top_nodes_off as usize / NODE_BYTES,
+        }
     }
 
     /// A tracer that reads only the tiles `pager` has made resident.
@@ -317,42 +437,87 @@ impl<'s> Tracer<'s> {
         self.scene
     }
 
-    /// Points `c` at node array `arr`: [`Open::Skip`] when that tile is corrupt (skip the
-    /// entry), [`Open::Missing`] when a paged tile is not resident (it has been requested).
-    #[inline]
-    fn open(&self, c: &mut Cursor<'s>, arr: u32) -> Open {
-        if c.arr == arr {
-            return Open::Ready;
-        }
-        if arr == TOP {
-            c.nodes = self.top;
-            c.tile = None;
-        } else {
-            let t = match self.pager {
-                None => match self.scene.tile(arr) {
-                    Some(t) => t,
-                    None => return Open::Skip,
-                },
-                Some(p) => match p.acquire(arr) {
-                    Access::Ready => self.scene.tile_view(arr),
-                    Access::Corrupt => return Open::Skip,
-                    Access::Missing => return Open::Missing,
-                },
-            };
-            stats::count(|s| s.tiles_entered += 1);
-            let e = &self.tiles[arr as usize];
-            c.nodes = t.nodes;
-            c.tile = Some(t);
-            c.part = e.part;
-            c.first_slot = e.first_slot;
-        }
-        c.arr = arr;
-        Open::Ready
+    /// A cursor on the top-level tree.
+    fn top_cursor(&self) -> Cursor {
+        Cursor { arr: TOP, node_base: self.top_base, block_base: 0, part: 0, first_slot: 0 }
     }
 
-    fn part_root(&self, p: u32) -> Entry {
-        let e = &self.parts[p as usize];
-        Entry { arr: e.root_tile, node: e.root_node, t: 0.0 }
+    /// Points `c` at node array `arr`; fails with [`Step::Skip`] when that tile is corrupt
+    /// and, on a paged tracer, with [`Step::Missing`] when it is not resident (now requested).
+    #[inline(always)]
+    fn open(&self, c: &mut Cursor, arr: u32) -> Result<(), Step<'s>> {
+        if c.arr == arr {
+            return Ok(());
+        }
+        self.enter(c, arr)
+    }
+
+    /// [`Tracer::open`] when `arr` is not the open array.
+    #[inline(never)]
+    fn enter(&self, c: &mut Cursor, arr: u32) -> Result<(), Step<'s>> {
+        if arr == TOP {
+            *c = self.top_cursor();
+            return Ok(());
+        }
+        match self.pager {
+            None => {
+                if !self.scene.tile_usable(arr) {
+                    return Err(Step::Skip);
+                }
+            }
+            Some(p) => match p.acquire(arr) {
+                Access::Ready => {}
+                Access::Corrupt => return Err(Step::Skip),
+                Access::Missing => return Err(Step::Missing(arr)),
+            },
+        }
+        stats::count(|s| s.tiles_entered += 1);
+        // A usable tile exists and lies in the file (checked by `Scene::open`), page aligned.
+        let e = &self.tiles[arr as usize];
+        let off = e.offset as usize;
+        *c = Cursor {
+            arr,
+            node_base: off / NODE_BYTES,
+            block_base: (off + e.node_count as usize * NODE_BYTES) / 16,
+            part: e.part,
+            first_slot: e.first_slot,
+        };
+        Ok(())
+    }
+
+    /// Resolves a popped entry: opens the node array it lives in and says what it is.
+    #[inline(always)]
+    fn step(&self, c: &mut Cursor, e: &Entry) -> Step<'s> {
+        let r = e.r;
+        let lo = r as u32;
+        let (arr, node) = match r >> 62 {
+            0 => (e.arr, lo),
+            1 => {
+                if let Err(s) = self.open(c, e.arr) {
+                    return s;
+                }
+                return Step::Leaf { first: lo, count: ((r >> 32) & 0xff) as u32 };
+            }
+            2 => (lo, ((r >> 32) & 0x3fff_ffff) as u32),
+            _ => match self.parts.get(lo as usize) {
+                // Parts only hang off the top-level tree (checked by `Scene::open`); all ones
+                // is an empty slot.
+                Some(p) if r != ChildRef::EMPTY.0 => (p.root_tile, p.root_node),
+                _ => return Step::Skip,
+            },
+        };
+        if let Err(s) = self.open(c, arr) {
+            return s;
+        }
+        // In range: node indices were checked with the tile (`Scene::check_tile`).
+        Step::Node(&self.nodes[c.node_base + node as usize], arr)
+    }
+
+    /// Block `blk` of the open tile.
+    #[inline(always)]
+    fn block(&self, c: &Cursor, blk: u32) -> &'s Block {
+        let s = c.block_base + 9 * blk as usize;
+        self.vec4[s..s + 9].try_into().expect("nine units")
     }
 
     /// The closest hit of `ray` in `[ray.t_min, ray.t_max)`. On a paged tracer this waits
@@ -441,6 +606,9 @@ impl<'s> Tracer<'s> {
         }
     }
 
+    /// The single-ray kernel. Near-first: of the children a node's box test hits, the
+    /// nearest is visited next without touching the stack, the others are pushed far to near.
+    /// Leaves are children like any other, so they too are tested nearest first.
     fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
         stats::count(|s| s.rays += 1);
         let rb = RayBox::new(ray);
@@ -449,100 +617,95 @@ impl<'s> Tracer<'s> {
         let mut rt: Option<RayTri4> = None;
         let mut best: Option<Hit> = None;
         let mut t_best = ray.t_max;
-        let mut stack = [Entry { arr: TOP, node: 0, t: 0.0 }; STACK];
-        let mut sp = 1;
-        // Entries beyond the fixed stack (only for pathologically deep trees; order does not
-        // matter for correctness, only for speed).
-        let mut spill: Vec<Entry> = Vec::new();
-        if let Some(p) = from {
-            best = p.best;
-            t_best = best.map_or(ray.t_max, |h| h.t);
-            let k = p.stack.len().min(STACK);
-            let split = p.stack.len() - k;
-            stack[..k].copy_from_slice(&p.stack[split..]);
-            sp = k;
-            spill.extend_from_slice(&p.stack[..split]);
+        let mut fixed = [Entry::ROOT; STACK];
+        let mut stack = Stack::new(&mut fixed);
+        match from {
+            Some(p) => {
+                best = p.best;
+                t_best = best.map_or(ray.t_max, |h| h.t);
+                for e in p.stack {
+                    stack.push(e);
+                }
+            }
+            None => stack.push(Entry::ROOT),
         }
-        let mut c = Cursor { arr: TOP, nodes: self.top, tile: None, part: 0, first_slot: 0 };
-        loop {
-            let e = if sp > 0 {
-                sp -= 1;
-                stack[sp]
-            } else if let Some(e) = spill.pop() {
-                e
-            } else {
-                break;
-            };
+        let mut c = self.top_cursor();
+        'pop: while let Some(mut e) = stack.pop() {
             if e.t > t_best * BOX_EPS {
                 continue;
             }
-            match self.open(&mut c, e.arr) {
-                Open::Ready => {}
-                Open::Skip => continue,
-                Open::Missing => {
-                    let mut stack_out = spill;
-                    stack_out.extend_from_slice(&stack[..sp]);
-                    stack_out.push(e);
-                    return Traced::Pending(Pending { stack: stack_out, best, any, tile: e.arr });
-                }
-            }
-            let node = &c.nodes[e.node as usize];
-            stats::count(|s| s.nodes += 1);
-            let (dist, mut mask) = rb.test(node, ray.t_min, t_best);
-            // Children hit, sorted far to near (pushed in that order, the nearest pops first).
-            let mut hits = [(0f32, 0u64); 4];
-            let mut nh = 0;
-            while mask != 0 {
-                let k = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let child = node.child[k];
-                if let Child::Leaf { first, count } = ChildRef(child).decode() {
-                    let tile = c.tile.expect("leaves live in tiles");
-                    let rt = rt.get_or_insert_with(|| RayTri4::new(ray));
-                    let mut left = count;
-                    let mut blk = first;
-                    while left > 0 {
-                        let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
-                        let b = &tile.blocks[blk as usize];
-                        stats::count(|s| s.blocks += 1);
-                        if let Some((lane, h)) = rt.test(b, lanes, t_best) {
-                            t_best = h.t;
-                            let prim = c.first_slot + 4 * blk + lane as u32;
-                            best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: b.tri(lane) });
-                            if any {
-                                return Traced::Done(best);
+            // Descend from `e`, always into the nearest child hit.
+            loop {
+                let (node, arr) = match self.step(&mut c, &e) {
+                    Step::Node(n, arr) => (n, arr),
+                    Step::Leaf { first, count } => {
+                        let rt = rt.get_or_insert_with(|| RayTri4::new(ray));
+                        let mut left = count;
+                        let mut blk = first;
+                        while left > 0 {
+                            let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
+                            let b = self.block(&c, blk);
+                            stats::count(|s| s.blocks += 1);
+                            if let Some((lane, h)) = rt.test(b, lanes, t_best) {
+                                t_best = h.t;
+                                let prim = c.first_slot + 4 * blk + lane as u32;
+                                best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: corners(b, lane) });
+                                if any {
+                                    return Traced::Done(best);
+                                }
                             }
+                            left = left.saturating_sub(4);
+                            blk += 1;
                         }
-                        left = left.saturating_sub(4);
-                        blk += 1;
+                        continue 'pop;
                     }
-                    continue;
-                }
-                let d = dist[k];
-                let mut j = nh;
-                while j > 0 && hits[j - 1].0 < d {
-                    hits[j] = hits[j - 1];
-                    j -= 1;
-                }
-                hits[j] = (d, child);
-                nh += 1;
-            }
-            for &(d, child) in &hits[..nh] {
-                if d > t_best * BOX_EPS {
-                    continue;
-                }
-                let entry = match ChildRef(child).decode() {
-                    Child::Inner(n) => Entry { arr: e.arr, node: n, t: d },
-                    Child::Link { tile, node } => Entry { arr: tile, node, t: d },
-                    Child::Part(p) => Entry { t: d, ..self.part_root(p) },
-                    Child::Empty | Child::Leaf { .. } => continue,
+                    Step::Skip => continue 'pop,
+                    Step::Missing(tile) => {
+                        let mut stack_out = stack.take_all();
+                        stack_out.push(e);
+                        return Traced::Pending(Pending { stack: stack_out, best, any, tile });
+                    }
                 };
-                if sp < STACK {
-                    stack[sp] = entry;
-                    sp += 1;
-                } else {
-                    spill.push(entry);
+                stats::count(|s| s.nodes += 1);
+                let (dist, mask) = rb.test(node, ray.t_min, t_best);
+                if mask == 0 {
+                    continue 'pop;
                 }
+                let at = |k: u32| Entry { r: node.child[k as usize], arr, t: dist[k as usize] };
+                let k0 = mask.trailing_zeros();
+                let m1 = mask & (mask - 1);
+                if m1 == 0 {
+                    e = at(k0);
+                    continue;
+                }
+                let (a, b) = (at(k0), at(m1.trailing_zeros()));
+                let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
+                let m2 = m1 & (m1 - 1);
+                if m2 == 0 {
+                    stack.push(far);
+                    e = near;
+                    continue;
+                }
+                // Three or more children: sort them far to near, push all but the nearest.
+                let mut order = [near; W];
+                order[0] = far;
+                let mut n = 2;
+                let mut m = m2;
+                while m != 0 {
+                    let x = at(m.trailing_zeros());
+                    m &= m - 1;
+                    let mut j = n;
+                    while j > 0 && order[j - 1].t < x.t {
+                        order[j] = order[j - 1];
+                        j -= 1;
+                    }
+                    order[j] = x;
+                    n += 1;
+                }
+                for &x in &order[..n - 1] {
+                    stack.push(x);
+                }
+                e = order[n - 1];
             }
         }
         Traced::Done(best)
@@ -552,6 +715,7 @@ impl<'s> Tracer<'s> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use megaray_scene::format::Tri4;
 
     struct Rng(u64);
     impl Rng {
@@ -586,8 +750,8 @@ mod tests {
                 let ray = Ray::new(org, target - org);
                 let rt = RayTri4::new(&ray);
                 for lanes in [0b1111u32, 0b0111, 0b0001] {
-                    let got = rt.test(&b, lanes, f32::INFINITY);
-                    let want = rt.scalar(&b, lanes, f32::INFINITY);
+                    let got = rt.test(&b.v, lanes, f32::INFINITY);
+                    let want = rt.scalar(&b.v, lanes, f32::INFINITY);
                     assert_eq!(got.map(|g| g.1), want.map(|w| w.1), "ray {ray:?} lanes {lanes:b}");
                     // And the scalar lane test is the base reference itself.
                     let mut best: Option<TriHit> = None;

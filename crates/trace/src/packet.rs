@@ -1,5 +1,5 @@
 //! Packet traversal: 16 coherent rays (a 4x4 pixel block) walk the tree together. Each node's
-//! four boxes are tested against all 16 rays, one box at a time across the rays, so a node is
+//! eight boxes are tested against all 16 rays, one box at a time across the rays, so a node is
 //! fetched and decoded once for the packet and the box arithmetic runs 16 rays wide.
 //!
 //! The kernel is written once, as plain loops over the 16 lanes ([`traverse`]), and compiled
@@ -10,9 +10,7 @@
 use std::sync::OnceLock;
 
 use megaray_base::Ray;
-use megaray_scene::format::{Child, ChildRef};
-
-use crate::{Cursor, Entry, Hit, Open, RayTri4, Tracer, BOX_EPS, TOP};
+use crate::{corners, fmax, fmin, Entry, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
 
 /// Rays in a packet.
 pub const WIDTH: usize = 16;
@@ -100,23 +98,6 @@ unsafe fn traverse_avx2(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>])
     traverse(tracer, rays, hits)
 }
 
-#[inline(always)]
-fn fmin(a: f32, b: f32) -> f32 {
-    if a < b {
-        a
-    } else {
-        b
-    }
-}
-
-#[inline(always)]
-fn fmax(a: f32, b: f32) -> f32 {
-    if a > b {
-        a
-    } else {
-        b
-    }
-}
 
 /// The packet kernel. Every result equals [`Tracer::intersect`] on the same ray: the box tests
 /// only decide which nodes are visited (conservatively, as in the single-ray kernel), and the
@@ -148,24 +129,54 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
         hits[i] = None;
     }
     let mut tri: [Option<RayTri4>; WIDTH] = [const { None }; WIDTH];
-    let mut stack: Vec<Entry> = Vec::with_capacity(64);
-    stack.push(Entry { arr: TOP, node: 0, t: 0.0 });
-    let mut c = Cursor { arr: TOP, nodes: tracer.top, tile: None, part: 0, first_slot: 0 };
-    while let Some(e) = stack.pop() {
+    // Entries with the mask of the rays that entered their box.
+    let mut stack: Vec<(Entry, u32)> = Vec::with_capacity(64);
+    stack.push((Entry::ROOT, (1u32 << n) - 1));
+    let mut c = tracer.top_cursor();
+    while let Some((e, rays_in)) = stack.pop() {
         // Skip entries that every ray has passed by.
-        let mut any = false;
+        let mut live = 0u32;
         for r in 0..WIDTH {
-            any |= e.t <= p.t_max[r] * BOX_EPS;
+            live |= ((e.t <= p.t_max[r] * BOX_EPS) as u32) << r;
         }
-        if !any || tracer.open(&mut c, e.arr) != Open::Ready {
+        let live = live & rays_in;
+        if live == 0 {
             continue;
         }
-        let node = &c.nodes[e.node as usize];
+        let (node, arr) = match tracer.step(&mut c, &e) {
+            Step::Node(node, arr) => (node, arr),
+            Step::Leaf { first, count } => {
+                // Each ray that entered the box tests the triangles.
+                let mut m = live;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize;
+                    m &= m - 1;
+                    let rt = tri[r].get_or_insert_with(|| RayTri4::new(&rays[r]));
+                    let mut left = count;
+                    let mut blk = first;
+                    while left > 0 {
+                        let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
+                        let b = tracer.block(&c, blk);
+                        crate::stats::count(|s| s.blocks += 1);
+                        if let Some((lane, h)) = rt.test(b, lanes, p.t_max[r]) {
+                            p.t_max[r] = h.t;
+                            let prim = c.first_slot + 4 * blk + lane as u32;
+                            hits[r] = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: corners(b, lane) });
+                        }
+                        left = left.saturating_sub(4);
+                        blk += 1;
+                    }
+                }
+                continue;
+            }
+            // Packets run on unpaged tracers only: nothing is ever missing.
+            Step::Skip | Step::Missing(_) => continue,
+        };
         crate::stats::count(|s| s.nodes += 1);
         // Box k against all rays: a ray mask and the nearest entry distance per slot.
-        let mut masks = [0u32; 4];
-        let mut near_min = [f32::INFINITY; 4];
-        for k in 0..4 {
+        let mut masks = [0u32; W];
+        let mut near_min = [f32::INFINITY; W];
+        for k in 0..W {
             let (lx, hx) = (node.lo_x[k], node.hi_x[k]);
             let (ly, hy) = (node.lo_y[k], node.hi_y[k]);
             let (lz, hz) = (node.lo_z[k], node.hi_z[k]);
@@ -189,62 +200,25 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
                 m |= (hit[r] as u32) << r;
                 d = fmin(d, near[r]);
             }
-            masks[k] = m;
+            masks[k] = m & live;
             near_min[k] = d;
         }
-        // Leaves now (each ray that entered the box tests the triangles); inner children
-        // sorted far to near.
-        let mut order = [(0f32, 0u64); 4];
+        // Children hit by some ray, pushed far to near (the nearest pops first).
+        let mut order = [(Entry::ROOT, 0u32); W];
         let mut no = 0;
-        for k in 0..4 {
+        for k in 0..W {
             if masks[k] == 0 {
                 continue;
             }
-            let child = node.child[k];
-            if let Child::Leaf { first, count } = ChildRef(child).decode() {
-                let tile = c.tile.expect("leaves live in tiles");
-                let mut m = masks[k];
-                while m != 0 {
-                    let r = m.trailing_zeros() as usize;
-                    m &= m - 1;
-                    if r >= n {
-                        continue;
-                    }
-                    let rt = tri[r].get_or_insert_with(|| RayTri4::new(&rays[r]));
-                    let mut left = count;
-                    let mut blk = first;
-                    while left > 0 {
-                        let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
-                        let b = &tile.blocks[blk as usize];
-                        crate::stats::count(|s| s.blocks += 1);
-                        if let Some((lane, h)) = rt.test(b, lanes, p.t_max[r]) {
-                            p.t_max[r] = h.t;
-                            let prim = c.first_slot + 4 * blk + lane as u32;
-                            hits[r] = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: b.tri(lane) });
-                        }
-                        left = left.saturating_sub(4);
-                        blk += 1;
-                    }
-                }
-                continue;
-            }
-            let d = near_min[k];
+            let x = (Entry { r: node.child[k], arr, t: near_min[k] }, masks[k]);
             let mut j = no;
-            while j > 0 && order[j - 1].0 < d {
+            while j > 0 && order[j - 1].0.t < x.0.t {
                 order[j] = order[j - 1];
                 j -= 1;
             }
-            order[j] = (d, child);
+            order[j] = x;
             no += 1;
         }
-        for &(d, child) in &order[..no] {
-            let entry = match ChildRef(child).decode() {
-                Child::Inner(i) => Entry { arr: e.arr, node: i, t: d },
-                Child::Link { tile, node } => Entry { arr: tile, node, t: d },
-                Child::Part(part) => Entry { t: d, ..tracer.part_root(part) },
-                Child::Empty | Child::Leaf { .. } => continue,
-            };
-            stack.push(entry);
-        }
+        stack.extend_from_slice(&order[..no]);
     }
 }
