@@ -47,11 +47,12 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
         size[i] = s;
     }
     let own = |i: usize| -> u64 {
-        NODE_BYTES as u64 + nodes[i]
-            .kids
-            .iter()
-            .map(|k| if let Kid::Leaf { count, .. } = k { leaf_bytes(*count) } else { 0 })
-            .sum::<u64>()
+        NODE_BYTES as u64
+            + nodes[i]
+                .kids
+                .iter()
+                .map(|k| if let Kid::Leaf { count, .. } = k { leaf_bytes(*count) } else { 0 })
+                .sum::<u64>()
     };
 
     // Pack: tile and local index of every node, in depth-first item order.

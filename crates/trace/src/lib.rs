@@ -195,9 +195,45 @@ impl RayBox {
     }
 
     /// Entry distances of the eight slots and a bit mask of the slots the ray enters
-    /// within `[t0, t1]`.
+    /// within `[t0, t1]`; with `AVX`, by [`RayBox::test_avx2`] (which the caller must only
+    /// ask for in code compiled for AVX2).
     #[inline(always)]
-    fn test(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
+    fn test<const AVX: bool>(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // SAFETY: `AVX` kernels are only instantiated inside `traverse_avx2`, which runs
+            // only on CPUs with AVX2 and FMA.
+            return unsafe { self.test_avx2(n, t0, t1) };
+        }
+        self.test_sse(n, t0, t1)
+    }
+
+    /// The box test as 8-wide AVX operations: the same operations as [`RayBox::test_sse`]
+    /// in the same order, so the same bits.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn test_avx2(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
+        use std::arch::x86_64::*;
+        let planes = n.planes();
+        // SAFETY: each row is eight readable f32s.
+        let ld = |k: usize, far: usize| unsafe { _mm256_loadu_ps(planes[(self.near[k] ^ far) & 7].as_ptr()) };
+        let o = self.org.map(|x| _mm256_set1_ps(x));
+        let inv = self.inv.map(|x| _mm256_set1_ps(x));
+        let q = |k: usize, far: usize| _mm256_mul_ps(_mm256_sub_ps(ld(k, far), o[k]), inv[k]);
+        let tn = _mm256_max_ps(_mm256_max_ps(_mm256_max_ps(q(0, 0), q(1, 0)), q(2, 0)), _mm256_set1_ps(t0));
+        let tf = _mm256_min_ps(_mm256_min_ps(_mm256_min_ps(q(0, 1), q(1, 1)), q(2, 1)), _mm256_set1_ps(t1));
+        let tf = _mm256_mul_ps(tf, _mm256_set1_ps(BOX_EPS));
+        let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
+        let mut near = [0f32; W];
+        // SAFETY: `near` has room for eight f32s.
+        unsafe { _mm256_storeu_ps(near.as_mut_ptr(), tn) };
+        (near, mask)
+    }
+
+    /// The box test as two 4-wide SSE halves (the baseline of x86-64, and the reference).
+    #[inline(always)]
+    fn test_sse(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
         let planes = n.planes();
         // `& 7`: in range by construction, and the compiler sees it.
         let row = |k: usize, far: usize| &planes[(self.near[k] ^ far) & 7];
@@ -251,11 +287,7 @@ type Block = [[f32; 4]; 9];
 /// The corners of the triangle in `lane` of a block (as `Tri4::tri`).
 #[inline]
 fn corners(v: &Block, lane: usize) -> [[f32; 3]; 3] {
-    [
-        [v[0][lane], v[1][lane], v[2][lane]],
-        [v[3][lane], v[4][lane], v[5][lane]],
-        [v[6][lane], v[7][lane], v[8][lane]],
-    ]
+    [[v[0][lane], v[1][lane], v[2][lane]], [v[3][lane], v[4][lane], v[5][lane]], [v[6][lane], v[7][lane], v[8][lane]]]
 }
 
 /// Per-ray constants of the 4-wide watertight test (the lanes of a [`Block`] at once).
@@ -368,6 +400,8 @@ pub struct Tracer<'s> {
     vec4: &'s [[f32; 4]],
     /// Index of the top-level tree's first node in `nodes`.
     top_base: usize,
+    /// Whether single rays take the AVX2 box test (chosen once, at creation).
+    avx2: bool,
 }
 
 /// A ray whose traversal stopped at a tile that is not resident: its stack and best hit so
@@ -419,7 +453,16 @@ impl<'s> Tracer<'s> {
             nodes: scene.node_pool(),
             vec4: scene.vec4_pool(),
             top_base: scene.header().top_nodes_off as usize / NODE_BYTES,
+            avx2: packet::Isa::detect() != packet::Isa::Baseline,
         }
+    }
+
+    /// This tracer with single-ray kernels for `isa` (one of [`packet::Isa::available`]):
+    /// for tests and benchmarks that compare the paths. [`Tracer::new`] picks the best one.
+    pub fn with_isa(mut self, isa: packet::Isa) -> Tracer<'s> {
+        assert!(packet::Isa::available().contains(&isa), "{isa:?} is not available on this machine");
+        self.avx2 = isa != packet::Isa::Baseline;
+        self
     }
 
     /// A tracer that reads only the tiles `pager` has made resident.
@@ -610,6 +653,24 @@ impl<'s> Tracer<'s> {
     /// nearest is visited next without touching the stack, the others are pushed far to near.
     /// Leaves are children like any other, so they too are tested nearest first.
     fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only when the CPU reported AVX2 and FMA (`Isa::detect`,
+            // `Isa::available`).
+            return unsafe { self.traverse_avx2(ray, any, from) };
+        }
+        self.traverse_in::<false>(ray, any, from)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn traverse_avx2(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
+        self.traverse_in::<true>(ray, any, from)
+    }
+
+    /// The kernel, its box test on AVX2 (`AVX`) or on the baseline's 4-wide SSE.
+    #[inline(always)]
+    fn traverse_in<const AVX: bool>(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
         stats::count(|s| s.rays += 1);
         let rb = RayBox::new(ray);
         // The triangle test's constants, made when the ray first reaches a leaf (most rays
@@ -667,7 +728,7 @@ impl<'s> Tracer<'s> {
                     }
                 };
                 stats::count(|s| s.nodes += 1);
-                let (dist, mask) = rb.test(node, ray.t_min, t_best);
+                let (dist, mask) = rb.test::<AVX>(node, ray.t_min, t_best);
                 if mask == 0 {
                     continue 'pop;
                 }

@@ -9,8 +9,8 @@
 
 use std::sync::OnceLock;
 
-use megaray_base::Ray;
 use crate::{corners, fmax, fmin, Entry, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
+use megaray_base::Ray;
 
 /// Rays in a packet.
 pub const WIDTH: usize = 16;
@@ -97,7 +97,6 @@ unsafe fn traverse_avx512(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>
 unsafe fn traverse_avx2(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
     traverse(tracer, rays, hits)
 }
-
 
 /// The packet kernel. Every result equals [`Tracer::intersect`] on the same ray: the box tests
 /// only decide which nodes are visited (conservatively, as in the single-ray kernel), and the
