@@ -147,7 +147,9 @@ impl Ctx {
     fn build(&self, refs: &mut [PrimRef], ext: Extent, start: u32) -> BNode {
         let n = refs.len();
         let bounds = ext.bounds();
-        if n <= 1 {
+        // One block's worth is always a leaf: splitting it costs a traversal step (C_TRAV)
+        // plus at least one block test, against the leaf's one block test.
+        if n <= 1 || (n <= self.cfg.max_leaf && n as u32 <= BLOCK) {
             return BNode::Leaf { bounds, start, count: n as u32 };
         }
         // Binned SAH over all three axes in one pass; fewer bins for small nodes, where the

@@ -9,8 +9,8 @@
 
 use std::sync::OnceLock;
 
-use crate::{corners, fmax, fmin, Entry, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
-use megaray_base::Ray;
+use crate::{corners, fmax, fmin, Block, Entry, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
+use megaray_base::{Ray, WatertightRay};
 
 /// Rays in a packet.
 pub const WIDTH: usize = 16;
@@ -71,6 +71,120 @@ struct Packet {
     t_max: [f32; WIDTH],
 }
 
+/// The watertight test's per-ray constants across a packet (structure of arrays), for
+/// packets whose rays all share the test's axis permutation `k` (coherent rays do): then
+/// one triangle is tested against all 16 rays at once ([`PacketTri::test`]).
+struct PacketTri {
+    k: [usize; 3],
+    ox: [f32; WIDTH],
+    oy: [f32; WIDTH],
+    oz: [f32; WIDTH],
+    sx: [f32; WIDTH],
+    sy: [f32; WIDTH],
+    sz: [f32; WIDTH],
+    t_min: [f32; WIDTH],
+}
+
+/// One triangle against the 16 rays of a packet: which rays hit it before their `t_max`
+/// (`ok`), which must take the reference's double-precision path (`exact`: an edge function
+/// is exactly zero), and the distances and barycentrics.
+struct Hits16 {
+    ok: u32,
+    exact: u32,
+    t: [f32; WIDTH],
+    u: [f32; WIDTH],
+    v: [f32; WIDTH],
+}
+
+impl PacketTri {
+    /// `None` unless every ray has the same permutation.
+    fn new(rays: &[Ray]) -> Option<PacketTri> {
+        let first = WatertightRay::new(&rays[0]);
+        let mut p = PacketTri {
+            k: first.k,
+            ox: [0.0; WIDTH],
+            oy: [0.0; WIDTH],
+            oz: [0.0; WIDTH],
+            sx: [0.0; WIDTH],
+            sy: [0.0; WIDTH],
+            sz: [1.0; WIDTH],
+            t_min: [0.0; WIDTH],
+        };
+        let [kx, ky, kz] = first.k;
+        for (i, r) in rays.iter().enumerate() {
+            let wt = WatertightRay::new(r);
+            if wt.k != first.k {
+                return None;
+            }
+            (p.ox[i], p.oy[i], p.oz[i]) = (wt.org[kx], wt.org[ky], wt.org[kz]);
+            (p.sx[i], p.sy[i], p.sz[i]) = (wt.s[0], wt.s[1], wt.s[2]);
+            p.t_min[i] = wt.t_min;
+        }
+        Some(p)
+    }
+
+    /// Lane `lane` of block `b` against every ray: per ray exactly the operations of
+    /// `RayTri4::test` (and so of the scalar reference), in plain loops over the 16 rays
+    /// that the compiler vectorizes.
+    #[inline(always)]
+    fn test(&self, b: &Block, lane: usize, t_max: &[f32; WIDTH]) -> Hits16 {
+        let [kx, ky, kz] = self.k;
+        let c = |corner: usize, k: usize| b[3 * corner + k][lane];
+        let (a_x, a_y, a_z) = (c(0, kx), c(0, ky), c(0, kz));
+        let (b_x, b_y, b_z) = (c(1, kx), c(1, ky), c(1, kz));
+        let (c_x, c_y, c_z) = (c(2, kx), c(2, ky), c(2, kz));
+        let mut h = Hits16 { ok: 0, exact: 0, t: [0.0; WIDTH], u: [0.0; WIDTH], v: [0.0; WIDTH] };
+        let mut ok = [false; WIDTH];
+        let mut exact = [false; WIDTH];
+        for r in 0..WIDTH {
+            let (ox, oy, oz) = (self.ox[r], self.oy[r], self.oz[r]);
+            let (sx, sy, sz) = (self.sx[r], self.sy[r], self.sz[r]);
+            let az = a_z - oz;
+            let bz = b_z - oz;
+            let cz = c_z - oz;
+            let ax = (a_x - ox) - sx * az;
+            let ay = (a_y - oy) - sy * az;
+            let bx = (b_x - ox) - sx * bz;
+            let by = (b_y - oy) - sy * bz;
+            let cx = (c_x - ox) - sx * cz;
+            let cy = (c_y - oy) - sy * cz;
+            let u = cx * by - cy * bx;
+            let v = ax * cy - ay * cx;
+            let w = bx * ay - by * ax;
+            // Bitwise `|` and `&`, not short-circuits: branch-free, so the loop vectorizes.
+            exact[r] = (u == 0.0) | (v == 0.0) | (w == 0.0);
+            let neg = (u < 0.0) | (v < 0.0) | (w < 0.0);
+            let pos = (u > 0.0) | (v > 0.0) | (w > 0.0);
+            let det = u + v + w;
+            let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+            let inv_det = 1.0 / det;
+            let t = t_scaled * inv_det;
+            ok[r] = !(neg & pos) & (det != 0.0) & (t >= self.t_min[r]) & (t < t_max[r]);
+            h.t[r] = t;
+            h.u[r] = v * inv_det;
+            h.v[r] = w * inv_det;
+        }
+        for r in 0..WIDTH {
+            h.ok |= (ok[r] as u32) << r;
+            h.exact |= (exact[r] as u32) << r;
+        }
+        h
+    }
+}
+
+/// The smallest of 16 floats (none NaN), pairwise: 16 -> 8 -> 4 -> 2 -> 1 lanes.
+#[inline(always)]
+fn min_tree(mut a: [f32; WIDTH]) -> f32 {
+    let mut n = WIDTH / 2;
+    while n > 0 {
+        for i in 0..n {
+            a[i] = fmin(a[i], a[i + n]);
+        }
+        n /= 2;
+    }
+    a[0]
+}
+
 /// Traces up to 16 rays as one packet with the given instruction set.
 pub(crate) fn intersect16(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], isa: Isa) {
     debug_assert!(rays.len() <= WIDTH && rays.len() == hits.len());
@@ -128,6 +242,8 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
         hits[i] = None;
     }
     let mut tri: [Option<RayTri4>; WIDTH] = [const { None }; WIDTH];
+    // Coherent packets test each triangle against all their rays at once.
+    let coherent = PacketTri::new(rays);
     // Entries with the mask of the rays that entered their box.
     let mut stack: Vec<(Entry, u32)> = Vec::with_capacity(64);
     stack.push((Entry::ROOT, (1u32 << n) - 1));
@@ -144,6 +260,37 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
         }
         let (node, arr) = match tracer.step(&mut c, &e) {
             Step::Node(node, arr) => (node, arr),
+            Step::Leaf { first, count } if live.count_ones() > 2 && coherent.is_some() => {
+                // Triangle by triangle, against all rays; hits update each ray's closest.
+                let pt = coherent.as_ref().expect("checked");
+                for i in 0..count {
+                    let (blk, lane) = (first + i / 4, (i % 4) as usize);
+                    let b = tracer.block(&c, blk);
+                    crate::stats::count(|s| s.blocks += (lane == 0) as u64);
+                    let h = pt.test(b, lane, &p.t_max);
+                    let prim = c.first_slot + 4 * blk + lane as u32;
+                    let mut m = h.ok & live & !h.exact;
+                    while m != 0 {
+                        let r = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        p.t_max[r] = h.t[r];
+                        hits[r] =
+                            Some(Hit { t: h.t[r], u: h.u[r], v: h.v[r], part: c.part, prim, tri: corners(b, lane) });
+                    }
+                    // An edge exactly on the ray: the reference's double-precision path.
+                    let mut m = h.exact & live;
+                    while m != 0 {
+                        let r = m.trailing_zeros() as usize;
+                        m &= m - 1;
+                        let rt = tri[r].get_or_insert_with(|| RayTri4::new(&rays[r]));
+                        if let Some(t) = rt.wt.intersect(&corners(b, lane), p.t_max[r]) {
+                            p.t_max[r] = t.t;
+                            hits[r] = Some(Hit { t: t.t, u: t.u, v: t.v, part: c.part, prim, tri: corners(b, lane) });
+                        }
+                    }
+                }
+                continue;
+            }
             Step::Leaf { first, count } => {
                 // Each ray that entered the box tests the triangles.
                 let mut m = live;
@@ -179,7 +326,7 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
             let (lx, hx) = (node.lo_x[k], node.hi_x[k]);
             let (ly, hy) = (node.lo_y[k], node.hi_y[k]);
             let (lz, hz) = (node.lo_z[k], node.hi_z[k]);
-            let mut hit = [false; WIDTH];
+            let mut bits = [0u32; WIDTH];
             let mut near = [f32::INFINITY; WIDTH];
             for r in 0..WIDTH {
                 let ax = (lx - p.ox[r]) * p.ix[r];
@@ -190,15 +337,13 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
                 let bz = (hz - p.oz[r]) * p.iz[r];
                 let t0 = fmax(fmax(fmax(fmin(ax, bx), fmin(ay, by)), fmin(az, bz)), p.t_min[r]);
                 let t1 = fmin(fmin(fmin(fmax(ax, bx), fmax(ay, by)), fmax(az, bz)), p.t_max[r]) * BOX_EPS;
-                hit[r] = t0 <= t1;
+                bits[r] = ((t0 <= t1) as u32) << r;
                 near[r] = if t0 <= t1 { t0 } else { f32::INFINITY };
             }
-            let mut m = 0u32;
-            let mut d = f32::INFINITY;
-            for r in 0..WIDTH {
-                m |= (hit[r] as u32) << r;
-                d = fmin(d, near[r]);
-            }
+            // Reductions as trees (halving the lanes), which vectorize; a serial chain of 16
+            // dependent `min`s does not (min of floats is not reassociated for us).
+            let m = bits.iter().fold(0, |a, &b| a | b);
+            let d = min_tree(near);
             masks[k] = m & live;
             near_min[k] = d;
         }
