@@ -156,7 +156,7 @@ impl Ctx {
         // per-node cost of clearing and sweeping bins would dominate.
         let (best, nb) = if n >= 1024 {
             (find_split::<32, 2>(refs, &ext, n > self.cfg.parallel_above), 32)
-        } else if n >= 32 {
+        } else if n >= 128 {
             (find_split::<16, 1>(refs, &ext, false), 16)
         } else {
             (find_split::<8, 1>(refs, &ext, false), 8)

@@ -1,6 +1,8 @@
 //! Packet traversal: 16 coherent rays (a 4x4 pixel block) walk the tree together. Each node's
 //! eight boxes are tested against all 16 rays, one box at a time across the rays, so a node is
-//! fetched and decoded once for the packet and the box arithmetic runs 16 rays wide.
+//! fetched and decoded once for the packet and the box arithmetic runs 16 rays wide. Leaves
+//! are tested one triangle against all 16 rays at once when the rays share the watertight
+//! test's axis permutation ([`PacketTri`]), else ray by ray.
 //!
 //! The kernel is written once, as plain loops over the 16 lanes ([`traverse`]), and compiled
 //! three times: for AVX-512, for AVX2 and for the baseline (SSE2 on x86-64), which the compiler
