@@ -644,9 +644,15 @@ impl<'s> Tracer<'s> {
             return;
         }
         assert!(packet::Isa::available().contains(&isa), "{isa:?} is not available on this machine");
-        for (r, h) in rays.chunks(packet::WIDTH).zip(hits.chunks_mut(packet::WIDTH)) {
-            packet::intersect16(self, r, h, isa);
+        // One stack per thread, kept between calls: callers pass one packet at a time.
+        thread_local! {
+            static STACK: std::cell::RefCell<packet::PacketStack> = const { std::cell::RefCell::new(Vec::new()) };
         }
+        STACK.with_borrow_mut(|stack| {
+            for (r, h) in rays.chunks(packet::WIDTH).zip(hits.chunks_mut(packet::WIDTH)) {
+                packet::intersect16(self, r, h, isa, stack);
+            }
+        });
     }
 
     /// The single-ray kernel. Near-first: of the children a node's box test hits, the

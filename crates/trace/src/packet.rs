@@ -174,51 +174,74 @@ impl PacketTri {
     }
 }
 
-/// The smallest of 16 floats (none NaN), pairwise: 16 -> 8 -> 4 -> 2 -> 1 lanes.
+/// Kernel flavours: how [`le_mask`] is computed (everything else is the same code).
+const BASE: u8 = 0;
+const AVX512: u8 = 2;
+
+/// The bits `r` for which `a[r] <= b[r]`: one compare into a mask register on AVX-512, four
+/// 4-wide compares and `movmskps` otherwise (LLVM does not find either in a plain loop).
 #[inline(always)]
-fn min_tree(mut a: [f32; WIDTH]) -> f32 {
-    let mut n = WIDTH / 2;
-    while n > 0 {
-        for i in 0..n {
-            a[i] = fmin(a[i], a[i + n]);
-        }
-        n /= 2;
+fn le_mask<const ISA: u8>(a: &[f32; WIDTH], b: &[f32; WIDTH]) -> u32 {
+    #[cfg(target_arch = "x86_64")]
+    if ISA == AVX512 {
+        // SAFETY: the AVX512 flavour is only instantiated in `traverse_avx512`, which runs
+        // only on CPUs that reported AVX-512F.
+        return unsafe { le_mask_avx512(a, b) };
     }
-    a[0]
+    let mut m = 0;
+    for q in 0..WIDTH / 4 {
+        let x = glam::Vec4::from_slice(&a[4 * q..4 * q + 4]);
+        let y = glam::Vec4::from_slice(&b[4 * q..4 * q + 4]);
+        m |= x.cmple(y).bitmask() << (4 * q);
+    }
+    m
 }
 
-/// Traces up to 16 rays as one packet with the given instruction set.
-pub(crate) fn intersect16(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], isa: Isa) {
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+fn le_mask_avx512(a: &[f32; WIDTH], b: &[f32; WIDTH]) -> u32 {
+    use std::arch::x86_64::*;
+    // SAFETY: both arrays hold sixteen readable f32s.
+    let (x, y) = unsafe { (_mm512_loadu_ps(a.as_ptr()), _mm512_loadu_ps(b.as_ptr())) };
+    _mm512_cmp_ps_mask::<_CMP_LE_OQ>(x, y) as u32
+}
+
+/// The packet stack, kept by the caller across packets (no allocation per packet).
+pub(crate) type PacketStack = Vec<(Entry, u32, [f32; WIDTH])>;
+
+/// Traces up to 16 rays as one packet with the given instruction set, on `stack` (left empty).
+pub(crate) fn intersect16(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], isa: Isa, stack: &mut PacketStack) {
     debug_assert!(rays.len() <= WIDTH && rays.len() == hits.len());
     match isa {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `Isa::Avx512` is only produced by `detect`/`available` after
         // `is_x86_feature_detected!("avx512f")` said this CPU has it.
-        Isa::Avx512 => unsafe { traverse_avx512(tracer, rays, hits) },
+        Isa::Avx512 => unsafe { traverse_avx512(tracer, rays, hits, stack) },
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `Isa::Avx2` is only produced after the CPU reported AVX2 and FMA.
-        Isa::Avx2 => unsafe { traverse_avx2(tracer, rays, hits) },
-        _ => traverse(tracer, rays, hits),
+        Isa::Avx2 => unsafe { traverse_avx2(tracer, rays, hits, stack) },
+        _ => traverse::<BASE>(tracer, rays, hits, stack),
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-unsafe fn traverse_avx512(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
-    traverse(tracer, rays, hits)
+unsafe fn traverse_avx512(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], stack: &mut PacketStack) {
+    traverse::<AVX512>(tracer, rays, hits, stack)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn traverse_avx2(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
-    traverse(tracer, rays, hits)
+unsafe fn traverse_avx2(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], stack: &mut PacketStack) {
+    traverse::<BASE>(tracer, rays, hits, stack)
 }
 
 /// The packet kernel. Every result equals [`Tracer::intersect`] on the same ray: the box tests
 /// only decide which nodes are visited (conservatively, as in the single-ray kernel), and the
 /// triangle tests are the single-ray ones.
 #[inline(always)]
-fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
+fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], stack: &mut PacketStack) {
     let n = rays.len();
     crate::stats::count(|s| s.rays += n as u64);
     let fix = |d: f32| if d.abs() < 1e-20 { 1e-20f32.copysign(d) } else { d };
@@ -243,28 +266,31 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
         p.t_max[i] = r.t_max;
         hits[i] = None;
     }
-    let mut tri: [Option<RayTri4>; WIDTH] = [const { None }; WIDTH];
-    // Coherent packets test each triangle against all their rays at once.
-    let coherent = PacketTri::new(rays);
-    // Entries with the mask of the rays that entered their box.
-    let mut stack: Vec<(Entry, u32)> = Vec::with_capacity(64);
-    stack.push((Entry::ROOT, (1u32 << n) - 1));
+    // Coherent packets test each triangle against all their rays at once (the constants
+    // are made when the first leaf with several rays is reached).
+    let mut coherent: Option<Option<PacketTri>> = None;
+    // Entries with the mask of the rays that entered their box and each ray's entry
+    // distance (kept per ray, as Embree's hybrid traversal does: no reduction across rays).
+    stack.clear();
+    stack.push((Entry::ROOT, (1u32 << n) - 1, [f32::NEG_INFINITY; WIDTH]));
     let mut c = tracer.top_cursor();
-    while let Some((e, rays_in)) = stack.pop() {
-        // Skip entries that every ray has passed by.
-        let mut live = 0u32;
+    while let Some((e, rays_in, dist)) = stack.pop() {
+        // Skip the rays that have found something nearer since, and the entry if all have.
+        let mut t_far = [0f32; WIDTH];
         for r in 0..WIDTH {
-            live |= ((e.t <= p.t_max[r] * BOX_EPS) as u32) << r;
+            t_far[r] = p.t_max[r] * BOX_EPS;
         }
-        let live = live & rays_in;
+        let live = rays_in & le_mask::<ISA>(&dist, &t_far);
         if live == 0 {
             continue;
         }
         let (node, arr) = match tracer.step(&mut c, &e) {
             Step::Node(node, arr) => (node, arr),
-            Step::Leaf { first, count } if live.count_ones() > 2 && coherent.is_some() => {
+            Step::Leaf { first, count }
+                if live.count_ones() > 2 && coherent.get_or_insert_with(|| PacketTri::new(rays)).is_some() =>
+            {
                 // Triangle by triangle, against all rays; hits update each ray's closest.
-                let pt = coherent.as_ref().expect("checked");
+                let pt = coherent.as_ref().and_then(|c| c.as_ref()).expect("checked");
                 for i in 0..count {
                     let (blk, lane) = (first + i / 4, (i % 4) as usize);
                     let b = tracer.block(&c, blk);
@@ -284,8 +310,7 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        let rt = tri[r].get_or_insert_with(|| RayTri4::new(&rays[r]));
-                        if let Some(t) = rt.wt.intersect(&corners(b, lane), p.t_max[r]) {
+                        if let Some(t) = WatertightRay::new(&rays[r]).intersect(&corners(b, lane), p.t_max[r]) {
                             p.t_max[r] = t.t;
                             hits[r] = Some(Hit { t: t.t, u: t.u, v: t.v, part: c.part, prim, tri: corners(b, lane) });
                         }
@@ -299,7 +324,8 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
-                    let rt = tri[r].get_or_insert_with(|| RayTri4::new(&rays[r]));
+                    // Made per leaf: cheaper than keeping 16 of them (3 KiB to initialise).
+                    let rt = RayTri4::new(&rays[r]);
                     let mut left = count;
                     let mut blk = first;
                     while left > 0 {
@@ -321,15 +347,16 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
             Step::Skip | Step::Missing(_) => continue,
         };
         crate::stats::count(|s| s.nodes += 1);
-        // Box k against all rays: a ray mask and the nearest entry distance per slot.
-        let mut masks = [0u32; W];
-        let mut near_min = [f32::INFINITY; W];
+        // Box k against all rays: the mask of rays that enter it, and their entry distances.
+        // Children hit go straight onto the stack, sorted there far to near (the nearest on
+        // top); no staging array to initialise.
+        let base = stack.len();
         for k in 0..W {
             let (lx, hx) = (node.lo_x[k], node.hi_x[k]);
             let (ly, hy) = (node.lo_y[k], node.hi_y[k]);
             let (lz, hz) = (node.lo_z[k], node.hi_z[k]);
-            let mut bits = [0u32; WIDTH];
-            let mut near = [f32::INFINITY; WIDTH];
+            let mut t0 = [0f32; WIDTH];
+            let mut t1 = [0f32; WIDTH];
             for r in 0..WIDTH {
                 let ax = (lx - p.ox[r]) * p.ix[r];
                 let bx = (hx - p.ox[r]) * p.ix[r];
@@ -337,34 +364,22 @@ fn traverse(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>]) {
                 let by = (hy - p.oy[r]) * p.iy[r];
                 let az = (lz - p.oz[r]) * p.iz[r];
                 let bz = (hz - p.oz[r]) * p.iz[r];
-                let t0 = fmax(fmax(fmax(fmin(ax, bx), fmin(ay, by)), fmin(az, bz)), p.t_min[r]);
-                let t1 = fmin(fmin(fmin(fmax(ax, bx), fmax(ay, by)), fmax(az, bz)), p.t_max[r]) * BOX_EPS;
-                bits[r] = ((t0 <= t1) as u32) << r;
-                near[r] = if t0 <= t1 { t0 } else { f32::INFINITY };
+                t0[r] = fmax(fmax(fmax(fmin(ax, bx), fmin(ay, by)), fmin(az, bz)), p.t_min[r]);
+                t1[r] = fmin(fmin(fmin(fmax(ax, bx), fmax(ay, by)), fmax(az, bz)), p.t_max[r]) * BOX_EPS;
             }
-            // Reductions as trees (halving the lanes), which vectorize; a serial chain of 16
-            // dependent `min`s does not (min of floats is not reassociated for us).
-            let m = bits.iter().fold(0, |a, &b| a | b);
-            let d = min_tree(near);
-            masks[k] = m & live;
-            near_min[k] = d;
-        }
-        // Children hit by some ray, pushed far to near (the nearest pops first).
-        let mut order = [(Entry::ROOT, 0u32); W];
-        let mut no = 0;
-        for k in 0..W {
-            if masks[k] == 0 {
+            let m = le_mask::<ISA>(&t0, &t1) & live;
+            if m == 0 {
                 continue;
             }
-            let x = (Entry { r: node.child[k], arr, t: near_min[k] }, masks[k]);
-            let mut j = no;
-            while j > 0 && order[j - 1].0.t < x.0.t {
-                order[j] = order[j - 1];
+            // Children ordered far to near by the entry distance of their first ray (an
+            // order for speed only; culling uses every ray's own distance).
+            let key = t0[m.trailing_zeros() as usize];
+            stack.push((Entry { r: node.child[k], arr, t: key }, m, t0));
+            let mut j = stack.len() - 1;
+            while j > base && stack[j - 1].0.t < key {
+                stack.swap(j - 1, j);
                 j -= 1;
             }
-            order[j] = x;
-            no += 1;
         }
-        stack.extend_from_slice(&order[..no]);
     }
 }
