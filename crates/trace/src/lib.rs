@@ -402,6 +402,9 @@ pub struct Tracer<'s> {
     top_base: usize,
     /// Whether single rays take the AVX2 box test (chosen once, at creation).
     avx2: bool,
+    /// Where traversals start: the top-level tree's root, or, when the scene has a single
+    /// part, that part's root (the top level would only test the part's box again).
+    root: Entry,
 }
 
 /// A ray whose traversal stopped at a tile that is not resident: its stack and best hit so
@@ -454,6 +457,10 @@ impl<'s> Tracer<'s> {
             vec4: scene.vec4_pool(),
             top_base: scene.header().top_nodes_off as usize / NODE_BYTES,
             avx2: packet::Isa::detect() != packet::Isa::Baseline,
+            root: match scene.parts().len() {
+                1 => Entry { r: ChildRef::part(0).0, ..Entry::ROOT },
+                _ => Entry::ROOT,
+            },
         }
     }
 
@@ -694,7 +701,7 @@ impl<'s> Tracer<'s> {
                     stack.push(e);
                 }
             }
-            None => stack.push(Entry::ROOT),
+            None => stack.push(self.root),
         }
         let mut c = self.top_cursor();
         'pop: while let Some(mut e) = stack.pop() {

@@ -272,7 +272,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
     // Entries with the mask of the rays that entered their box and each ray's entry
     // distance (kept per ray, as Embree's hybrid traversal does: no reduction across rays).
     stack.clear();
-    stack.push((Entry::ROOT, (1u32 << n) - 1, [f32::NEG_INFINITY; WIDTH]));
+    stack.push((tracer.root, (1u32 << n) - 1, [f32::NEG_INFINITY; WIDTH]));
     let mut c = tracer.top_cursor();
     while let Some((e, rays_in, dist)) = stack.pop() {
         // Skip the rays that have found something nearer since, and the entry if all have.
