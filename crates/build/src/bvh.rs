@@ -155,11 +155,11 @@ impl Ctx {
         // Binned SAH over all three axes in one pass; fewer bins for small nodes, where the
         // per-node cost of clearing and sweeping bins would dominate.
         let (best, nb) = if n >= 1024 {
-            (find_split::<32, 2>(refs, &ext, n > self.cfg.parallel_above), 32)
+            (find_split::<32, 2, false>(refs, &ext, n > self.cfg.parallel_above), 32)
         } else if n >= 128 {
-            (find_split::<16, 1>(refs, &ext, false), 16)
+            (find_split::<16, 1, false>(refs, &ext, false), 16)
         } else {
-            (find_split::<8, 1>(refs, &ext, false), 8)
+            (find_split::<8, 1, true>(refs, &ext, false), 8)
         };
         let cmin = ext.clo;
         let scale = bin_scale(&ext, nb);
@@ -258,9 +258,11 @@ impl<const NB: usize> Bins<NB> {
 }
 
 /// The best binned-SAH split of `refs` with `NB` bins per axis (binned by `SETS` interleaved
-/// sets, and across threads when `parallel`). Returns (cost, axis, first bin of the right
-/// side); the cost is infinite when no split separates anything.
-fn find_split<const NB: usize, const SETS: usize>(
+/// sets, and across threads when `parallel`); with `LONGEST`, on the axis of the longest
+/// centroid extent only (for small nodes, where the sweeps cost more than the binning).
+/// Returns (cost, axis, first bin of the right side); the cost is infinite when no split
+/// separates anything.
+fn find_split<const NB: usize, const SETS: usize, const LONGEST: bool>(
     refs: &[PrimRef],
     ext: &Extent,
     parallel: bool,
@@ -277,8 +279,16 @@ fn find_split<const NB: usize, const SETS: usize>(
     };
     let (cnt, blo, bhi) = (&bins.cnt, &bins.lo, &bins.hi);
     let mut best = (f32::INFINITY, 0usize, 0usize);
+    let c = ext.chi - ext.clo;
+    let longest = if c.x >= c.y && c.x >= c.z {
+        0
+    } else if c.y >= c.z {
+        1
+    } else {
+        2
+    };
     for axis in 0..3 {
-        if scale[axis] == 0.0 {
+        if scale[axis] == 0.0 || (LONGEST && axis != longest) {
             continue;
         }
         let mut right_area = [0f32; NB];
