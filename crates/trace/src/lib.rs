@@ -331,23 +331,25 @@ impl RayTri4 {
         let u = cx * by - cy * bx;
         let vv = ax * cy - ay * cx;
         let w = bx * ay - by * ax;
-        let zero =
-            (u.cmpeq(Vec4::ZERO).bitmask() | vv.cmpeq(Vec4::ZERO).bitmask() | w.cmpeq(Vec4::ZERO).bitmask()) & lanes;
+        let z = Vec4::ZERO;
+        // Masks combined as vectors, one `movmskps` each.
+        let zero = (u.cmpeq(z) | vv.cmpeq(z) | w.cmpeq(z)).bitmask() & lanes;
         if zero != 0 {
             // An edge or vertex exactly on the ray: the reference's double-precision path.
             return self.scalar(b, lanes, t_max);
         }
-        let neg = u.cmplt(Vec4::ZERO).bitmask() | vv.cmplt(Vec4::ZERO).bitmask() | w.cmplt(Vec4::ZERO).bitmask();
-        let pos = u.cmpgt(Vec4::ZERO).bitmask() | vv.cmpgt(Vec4::ZERO).bitmask() | w.cmpgt(Vec4::ZERO).bitmask();
+        let neg = u.cmplt(z) | vv.cmplt(z) | w.cmplt(z);
+        let pos = u.cmpgt(z) | vv.cmpgt(z) | w.cmpgt(z);
+        let inside = lanes & !(neg & pos).bitmask();
+        if inside == 0 {
+            // The usual outcome: no lane's edge functions agree in sign (no division needed).
+            return None;
+        }
         let det = u + vv + w;
         let t_scaled = u * (sz * az) + vv * (sz * bz) + w * (sz * cz);
         let inv_det = Vec4::ONE / det;
         let t = t_scaled * inv_det;
-        let ok = lanes
-            & !(neg & pos)
-            & !det.cmpeq(Vec4::ZERO).bitmask()
-            & t.cmpge(self.t_min).bitmask()
-            & t.cmplt(Vec4::splat(t_max)).bitmask();
+        let ok = inside & (det.cmpne(z) & t.cmpge(self.t_min) & t.cmplt(Vec4::splat(t_max))).bitmask();
         if ok == 0 {
             return None;
         }
