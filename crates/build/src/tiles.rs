@@ -98,11 +98,12 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
         }
     }
 
-    // Emit file-layout nodes and triangles.
-    let mut tiles = Vec::with_capacity(tile_nodes.len());
-    let mut tri_source = Vec::with_capacity(tris.len());
-    for (t, list) in tile_nodes.iter().enumerate() {
+    // Emit file-layout nodes and triangles, tile by tile in parallel (each tile's own
+    // triangle sources, concatenated in tile order afterwards).
+    use rayon::prelude::*;
+    let emit = |(t, list): (usize, &Vec<u32>)| {
         let mut blob = TileBlob { nodes: Vec::with_capacity(list.len()), blocks: Vec::new() };
+        let mut src = Vec::new();
         for &n in list {
             let mut out = Node8::EMPTY;
             for (k, kid) in nodes[n as usize].kids.iter().enumerate() {
@@ -124,9 +125,9 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
                                 match chunk.get(lane) {
                                     Some(&p) => {
                                         b.set(lane, &tris[p as usize]);
-                                        tri_source.push(p);
+                                        src.push(p);
                                     }
-                                    None => tri_source.push(PADDING),
+                                    None => src.push(PADDING),
                                 }
                             }
                             blob.blocks.push(b);
@@ -138,7 +139,14 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
             }
             blob.nodes.push(out);
         }
+        (blob, src)
+    };
+    let emitted: Vec<(TileBlob, Vec<u32>)> = tile_nodes.par_iter().enumerate().map(emit).collect();
+    let mut tiles = Vec::with_capacity(emitted.len());
+    let mut tri_source = Vec::with_capacity(tris.len());
+    for (blob, src) in emitted {
         tiles.push(blob);
+        tri_source.extend_from_slice(&src);
     }
     Tiled { tiles, root_tile: tile_of[0], root_node: local_of[0], tri_source }
 }
