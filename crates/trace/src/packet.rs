@@ -276,10 +276,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
     let mut c = tracer.top_cursor();
     while let Some((e, rays_in, dist)) = stack.pop() {
         // Skip the rays that have found something nearer since, and the entry if all have.
-        let mut t_far = [0f32; WIDTH];
-        for r in 0..WIDTH {
-            t_far[r] = p.t_max[r] * BOX_EPS;
-        }
+        let t_far = p.t_max.map(|t| t * BOX_EPS);
         let live = rays_in & le_mask::<ISA>(&dist, &t_far);
         if live == 0 {
             continue;
