@@ -194,6 +194,21 @@ impl RayBox {
         }
     }
 
+    /// Whether the ray enters box `b` within `[t0, t1]`: the slot test of one box, with the
+    /// same arithmetic and widening.
+    #[inline(always)]
+    fn enters(&self, b: &megaray_base::Aabb, t0: f32, t1: f32) -> bool {
+        let mut tn = t0;
+        let mut tf = t1;
+        for k in 0..3 {
+            let lo = (b.min[k] - self.org[k]) * self.inv[k];
+            let hi = (b.max[k] - self.org[k]) * self.inv[k];
+            tn = fmax(fmin(lo, hi), tn);
+            tf = fmin(fmax(lo, hi), tf);
+        }
+        tn <= tf * BOX_EPS
+    }
+
     /// Entry distances of the eight slots and a bit mask of the slots the ray enters
     /// within `[t0, t1]`; with `AVX`, by [`RayBox::test_avx2`] (which the caller must only
     /// ask for in code compiled for AVX2).
@@ -407,6 +422,8 @@ pub struct Tracer<'s> {
     /// Where traversals start: the top-level tree's root, or, when the scene has a single
     /// part, that part's root (the top level would only test the part's box again).
     root: Entry,
+    /// The scene's bounding box: rays that miss it end before any setup.
+    bounds: megaray_base::Aabb,
 }
 
 /// A ray whose traversal stopped at a tile that is not resident: its stack and best hit so
@@ -459,6 +476,7 @@ impl<'s> Tracer<'s> {
             vec4: scene.vec4_pool(),
             top_base: scene.header().top_nodes_off as usize / NODE_BYTES,
             avx2: packet::Isa::detect() != packet::Isa::Baseline,
+            bounds: scene.header().bounds,
             root: match scene.parts().len() {
                 1 => Entry { r: ChildRef::part(0).0, ..Entry::ROOT },
                 _ => Entry::ROOT,
@@ -688,6 +706,10 @@ impl<'s> Tracer<'s> {
     fn traverse_in<const AVX: bool>(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
         stats::count(|s| s.rays += 1);
         let rb = RayBox::new(ray);
+        if from.is_none() && !rb.enters(&self.bounds, ray.t_min, ray.t_max) {
+            // Most rays of a wide view miss the whole scene: no traversal set up for them.
+            return Traced::Done(None);
+        }
         // The triangle test's constants, made when the ray first reaches a leaf (most rays
         // of a wide view never do).
         let mut rt: Option<RayTri4> = None;
@@ -751,6 +773,17 @@ impl<'s> Tracer<'s> {
                 let k0 = mask.trailing_zeros();
                 let m1 = mask & (mask - 1);
                 if m1 == 0 {
+                    e = at(k0);
+                    continue;
+                }
+                if any {
+                    // Any hit will do: no order to keep (as Embree's any-hit traversal);
+                    // the first child next, the others pushed as they come.
+                    let mut m = m1;
+                    while m != 0 {
+                        stack.push(at(m.trailing_zeros()));
+                        m &= m - 1;
+                    }
                     e = at(k0);
                     continue;
                 }
