@@ -171,7 +171,7 @@ fn packet_kernels_equal_single_rays() {
     let isas = Isa::available();
     assert!(isas.contains(&Isa::Baseline));
     let mut compared = 0;
-    for isa in isas {
+    for &isa in isas {
         for p in &packets {
             let mut hits = vec![None; p.len()];
             tracer.intersect_packet_with(p, &mut hits, isa);
@@ -219,7 +219,7 @@ fn single_ray_kernels_agree_across_isas() {
     let reference = Tracer::new(&scene).with_isa(Isa::Baseline);
     let want: Vec<_> = rays.par_iter().map(|r| (key(reference.intersect(r)), reference.occluded(r))).collect();
     assert!(want.iter().filter(|w| w.0.is_some()).count() > rays.len() / 4, "enough hits to compare");
-    for isa in Isa::available() {
+    for &isa in Isa::available() {
         let tracer = Tracer::new(&scene).with_isa(isa);
         let got: Vec<_> = rays.par_iter().map(|r| (key(tracer.intersect(r)), tracer.occluded(r))).collect();
         let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
