@@ -105,25 +105,61 @@ impl PacketTri {
     /// `None` unless every ray has the same permutation.
     fn new(rays: &[Ray]) -> Option<PacketTri> {
         let first = WatertightRay::new(&rays[0]);
+        let [kx, ky, kz] = first.k;
+        // The rays as structure of arrays (lanes past the packet repeat ray 0).
+        let mut d = [[0f32; WIDTH]; 3];
+        let mut o = [[0f32; WIDTH]; 3];
+        let mut t_min = [0f32; WIDTH];
+        for i in 0..WIDTH {
+            let r = rays.get(i).unwrap_or(&rays[0]);
+            (d[0][i], d[1][i], d[2][i]) = (r.dir.x, r.dir.y, r.dir.z);
+            (o[0][i], o[1][i], o[2][i]) = (r.org.x, r.org.y, r.org.z);
+            t_min[i] = r.t_min;
+        }
+        // Every lane's permutation must be ray 0's: `WatertightRay::new`'s comparisons,
+        // branch-free, over all lanes at once.
+        let neg0 = d[kz][0] < 0.0;
+        let mut differ = 0u32;
+        for i in 0..WIDTH {
+            let (ax, ay, az) = (d[0][i].abs(), d[1][i].abs(), d[2][i].abs());
+            let k = if ax > ay {
+                if ax > az {
+                    0
+                } else {
+                    2
+                }
+            } else if ay > az {
+                1
+            } else {
+                2
+            };
+            let dk = if k == 0 {
+                d[0][i]
+            } else if k == 1 {
+                d[1][i]
+            } else {
+                d[2][i]
+            };
+            differ |= ((k != kz) | ((dk < 0.0) != neg0)) as u32;
+        }
+        if differ != 0 {
+            return None;
+        }
         let mut p = PacketTri {
             k: first.k,
-            ox: [0.0; WIDTH],
-            oy: [0.0; WIDTH],
-            oz: [0.0; WIDTH],
+            ox: o[kx],
+            oy: o[ky],
+            oz: o[kz],
             sx: [0.0; WIDTH],
             sy: [0.0; WIDTH],
-            sz: [1.0; WIDTH],
-            t_min: [0.0; WIDTH],
+            sz: [0.0; WIDTH],
+            t_min,
         };
-        let [kx, ky, kz] = first.k;
-        for (i, r) in rays.iter().enumerate() {
-            let wt = WatertightRay::new(r);
-            if wt.k != first.k {
-                return None;
-            }
-            (p.ox[i], p.oy[i], p.oz[i]) = (wt.org[kx], wt.org[ky], wt.org[kz]);
-            (p.sx[i], p.sy[i], p.sz[i]) = (wt.s[0], wt.s[1], wt.s[2]);
-            p.t_min[i] = wt.t_min;
+        for i in 0..WIDTH {
+            // As `WatertightRay::new`: sz = 1 / d[kz], then d[kx] * sz and d[ky] * sz.
+            p.sz[i] = 1.0 / d[kz][i];
+            p.sx[i] = d[kx][i] * p.sz[i];
+            p.sy[i] = d[ky][i] * p.sz[i];
         }
         Some(p)
     }
