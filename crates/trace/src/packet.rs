@@ -103,6 +103,8 @@ struct Hits16 {
 
 impl PacketTri {
     /// `None` unless every ray has the same permutation.
+    // Lane loops index several arrays in step (the form that vectorizes).
+    #[allow(clippy::needless_range_loop)]
     fn new(rays: &[Ray]) -> Option<PacketTri> {
         let first = WatertightRay::new(&rays[0]);
         let [kx, ky, kz] = first.k;
