@@ -254,6 +254,13 @@ impl Scene {
         self.tile_usable(t).then(|| self.tile_unchecked_view(t))
     }
 
+    /// Whether tile `t` has been checked and found sound (no checking here: the fast path
+    /// of [`Scene::tile_usable`]).
+    #[inline(always)]
+    pub fn tile_checked(&self, t: u32) -> bool {
+        self.tile_state.get(t as usize).is_some_and(|s| s.load(Ordering::Acquire) == TILE_OK)
+    }
+
     /// Whether tile `t` may be used: checked now if it never was (then `true` from then on),
     /// `false` (and the fault recorded) when it is corrupt or does not exist.
     #[inline]

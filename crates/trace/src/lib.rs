@@ -519,7 +519,28 @@ impl<'s> Tracer<'s> {
         if c.arr == arr {
             return Ok(());
         }
+        if self.pager.is_none() && self.scene.tile_checked(arr) {
+            // The common crossing, inline: an unpaged tile already checked.
+            self.view(c, arr);
+            return Ok(());
+        }
         self.enter(c, arr)
+    }
+
+    /// Points `c` at tile `arr`, which exists and is usable.
+    #[inline(always)]
+    fn view(&self, c: &mut Cursor, arr: u32) {
+        stats::count(|s| s.tiles_entered += 1);
+        // A usable tile exists and lies in the file (checked by `Scene::open`), page aligned.
+        let e = &self.tiles[arr as usize];
+        let off = e.offset as usize;
+        *c = Cursor {
+            arr,
+            node_base: off / NODE_BYTES,
+            block_base: (off + e.node_count as usize * NODE_BYTES) / 16,
+            part: e.part,
+            first_slot: e.first_slot,
+        };
     }
 
     /// [`Tracer::open`] when `arr` is not the open array.
@@ -541,17 +562,7 @@ impl<'s> Tracer<'s> {
                 Access::Missing => return Err(Step::Missing(arr)),
             },
         }
-        stats::count(|s| s.tiles_entered += 1);
-        // A usable tile exists and lies in the file (checked by `Scene::open`), page aligned.
-        let e = &self.tiles[arr as usize];
-        let off = e.offset as usize;
-        *c = Cursor {
-            arr,
-            node_base: off / NODE_BYTES,
-            block_base: (off + e.node_count as usize * NODE_BYTES) / 16,
-            part: e.part,
-            first_slot: e.first_slot,
-        };
+        self.view(c, arr);
         Ok(())
     }
 
