@@ -109,6 +109,8 @@ struct Entry {
 impl Entry {
     /// The root of the top-level tree.
     const ROOT: Entry = Entry { r: 0, arr: TOP, t: f32::NEG_INFINITY };
+    /// All zero bits: what unused stack slots hold (cheapest to initialise).
+    const ZERO: Entry = Entry { r: 0, arr: 0, t: 0.0 };
 }
 
 /// The traversal stack: [`STACK`] entries on the machine stack, then a heap spill (only for
@@ -726,7 +728,7 @@ impl<'s> Tracer<'s> {
         let mut rt: Option<RayTri4> = None;
         let mut best: Option<Hit> = None;
         let mut t_best = ray.t_max;
-        let mut fixed = [Entry::ROOT; STACK];
+        let mut fixed = [Entry::ZERO; STACK];
         let mut stack = Stack::new(&mut fixed);
         match from {
             Some(p) => {
