@@ -332,7 +332,29 @@ impl RayTri4 {
     /// The nearest hit among the lanes of `b` set in `lanes`, in `[t_min, t_max)`.
     #[inline(always)]
     fn test(&self, b: &Block, lanes: u32, t_max: f32) -> Option<(usize, TriHit)> {
-        let [kx, ky, kz] = self.wt.k;
+        // One body per axis permutation, so that the rows it reads are constants (no index
+        // arithmetic or bounds checks per block); the permutation is fixed per ray.
+        match self.wt.k {
+            [1, 2, 0] => self.test_k::<1, 2, 0>(b, lanes, t_max),
+            [2, 1, 0] => self.test_k::<2, 1, 0>(b, lanes, t_max),
+            [2, 0, 1] => self.test_k::<2, 0, 1>(b, lanes, t_max),
+            [0, 2, 1] => self.test_k::<0, 2, 1>(b, lanes, t_max),
+            [0, 1, 2] => self.test_k::<0, 1, 2>(b, lanes, t_max),
+            [1, 0, 2] => self.test_k::<1, 0, 2>(b, lanes, t_max),
+            // `WatertightRay::new` makes no other permutation.
+            _ => self.scalar(b, lanes, t_max),
+        }
+    }
+
+    /// [`RayTri4::test`] for the permutation `[KX, KY, KZ]` (the ray's).
+    #[inline(always)]
+    fn test_k<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        b: &Block,
+        lanes: u32,
+        t_max: f32,
+    ) -> Option<(usize, TriHit)> {
+        let (kx, ky, kz) = (KX, KY, KZ);
         let [ox, oy, oz] = self.o;
         let [sx, sy, sz] = self.s;
         let v = |c: usize, k: usize| Vec4::from_array(b[3 * c + k]);
