@@ -541,6 +541,10 @@ pub struct InfoArgs {
     /// Also check every tile's checksum (reads the whole file).
     #[arg(long)]
     verify: bool,
+    /// Also walk every part's tree: node and leaf counts, child-slot fill and the SAH cost
+    /// as Embree's `verbose=2` statistics measure it (reads every node of the file).
+    #[arg(long)]
+    tree: bool,
 }
 
 pub fn info(a: InfoArgs) -> Result<()> {
@@ -574,7 +578,14 @@ pub fn info(a: InfoArgs) -> Result<()> {
     let (dmin, dmax) = (depths.iter().min().copied().unwrap_or(0), depths.iter().max().copied().unwrap_or(0));
     let tile_sizes: Vec<u32> = tiles.iter().map(|t| t.bytes).collect();
     let tmean = tile_sizes.iter().map(|&b| b as f64).sum::<f64>() / tile_sizes.len().max(1) as f64;
+    let tree = a.tree.then(|| scene.tree_stats());
     if a.json {
+        let tree = tree.map(|t| {
+            serde_json::json!({
+                "inner_nodes": t.inner_nodes, "child_slots": t.child_slots, "leaves": t.leaves,
+                "blocks": t.blocks, "sah": t.sah(), "sah_nodes": t.sah_nodes, "sah_leaves": t.sah_leaves,
+            })
+        });
         println!(
             "{}",
             serde_json::json!({
@@ -593,6 +604,7 @@ pub fn info(a: InfoArgs) -> Result<()> {
                     "attributes": attr_bytes as f64 / n, "tables": meta as f64 / n,
                 },
                 "verified": a.verify,
+                "tree": tree,
             })
         );
         return Ok(());
@@ -615,6 +627,16 @@ pub fn info(a: InfoArgs) -> Result<()> {
     println!("    tile padding   {:.1}", padding as f64 / n);
     println!("    attributes     {:.1}", attr_bytes as f64 / n);
     println!("    tables, header {:.1}", meta as f64 / n);
+    if let Some(t) = tree {
+        println!(
+            "  tree             {} inner nodes ({:.0}% of child slots used), {} leaves, {} blocks",
+            t.inner_nodes,
+            100.0 * t.child_slots as f64 / (8 * t.inner_nodes.max(1)) as f64,
+            t.leaves,
+            t.blocks
+        );
+        println!("    SAH cost       {:.3} = nodes {:.3} + leaves {:.3}", t.sah(), t.sah_nodes, t.sah_leaves);
+    }
     if a.verify {
         println!("  every tile's checksum verified");
     }

@@ -60,3 +60,27 @@ fn help_teaches_the_comparison() {
         assert!(out.contains(w), "help lacks {w}: {out}");
     }
 }
+
+/// `megaray info --tree`: the tree statistics count every node, leaf and block of every
+/// part exactly, and the SAH cost is at least the roots' (1 per part, weighted by triangles).
+#[test]
+fn tree_statistics_count_every_node() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = gen(dir.path(), "sphereflake:2");
+    let (path, _) = build(dir.path(), &[ply], "flake", Some(3000));
+    let scene = megaray_scene::Scene::open(&path).unwrap();
+    let t = scene.tree_stats();
+    let tiles = scene.tiles();
+    let parts = scene.parts().len() as u64;
+    assert!(parts > 1, "the test wants several parts");
+    assert_eq!(t.inner_nodes, tiles.iter().map(|e| e.node_count as u64).sum::<u64>());
+    assert_eq!(t.blocks, tiles.iter().map(|e| e.blocks as u64).sum::<u64>());
+    // Every node but a part's root is some node's child, and so is every leaf.
+    assert_eq!(t.child_slots, t.inner_nodes - parts + t.leaves);
+    assert!(t.leaves > 0 && t.sah() >= 1.0 && t.sah_leaves > 0.0, "{t:?}");
+    let (code, out, err) = run(&["info", "--tree", "--json", path.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let j: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(j["tree"]["inner_nodes"].as_u64(), Some(t.inner_nodes));
+    assert_eq!(j["tree"]["blocks"].as_u64(), Some(t.blocks));
+}

@@ -27,9 +27,11 @@
 pub mod error;
 pub mod format;
 pub mod reader;
+pub mod stats;
 pub mod writer;
 
 pub use error::{SceneError, SceneErrorKind};
 pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
 pub use reader::{Scene, Tile};
+pub use stats::TreeStats;
 pub use writer::{MaterialDesc, PartBlob, SceneWriter, TileBlob};

@@ -225,8 +225,10 @@ impl RayBox {
         self.test_sse(n, t0, t1)
     }
 
-    /// The box test as 8-wide AVX operations: the same operations as [`RayBox::test_sse`]
-    /// in the same order, so the same bits.
+    /// The box test as 8-wide AVX operations. Each slab distance is `(o - plane) * -inv`, the
+    /// exact negation of both factors of [`RayBox::test_sse`]'s `(plane - o) * inv` (IEEE
+    /// rounding is symmetric), so the same values (up to the sign of a zero, which no
+    /// comparison sees); written this way the plane rows are memory operands.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[inline]
@@ -236,8 +238,8 @@ impl RayBox {
         // SAFETY: each row is eight readable f32s.
         let ld = |k: usize, far: usize| unsafe { _mm256_loadu_ps(planes[(self.near[k] ^ far) & 7].as_ptr()) };
         let o = self.org.map(|x| _mm256_set1_ps(x));
-        let inv = self.inv.map(|x| _mm256_set1_ps(x));
-        let q = |k: usize, far: usize| _mm256_mul_ps(_mm256_sub_ps(ld(k, far), o[k]), inv[k]);
+        let ninv = self.inv.map(|x| _mm256_set1_ps(-x));
+        let q = |k: usize, far: usize| _mm256_mul_ps(_mm256_sub_ps(o[k], ld(k, far)), ninv[k]);
         let tn = _mm256_max_ps(_mm256_max_ps(_mm256_max_ps(q(0, 0), q(1, 0)), q(2, 0)), _mm256_set1_ps(t0));
         let tf = _mm256_min_ps(_mm256_min_ps(_mm256_min_ps(q(0, 1), q(1, 1)), q(2, 1)), _mm256_set1_ps(t1));
         let tf = _mm256_mul_ps(tf, _mm256_set1_ps(BOX_EPS));
@@ -598,27 +600,72 @@ impl<'s> Tracer<'s> {
         // and is caught with the parts.
         let r = e.r;
         let lo = r as u32;
-        let (arr, node) = match r >> 62 {
-            0 => (e.arr, lo),
-            1 => {
+        // The kind's two bits tested one at a time, in order of frequency: as a `match`, the
+        // compiler jumps through a table, an indirect branch that predicts worse.
+        let leaf_or_part = r & (1 << 62) != 0;
+        let (arr, node) = if (r as i64) >= 0 {
+            if !leaf_or_part {
+                (e.arr, lo)
+            } else {
                 if let Err(s) = self.open(c, e.arr) {
                     return s;
                 }
                 return Step::Leaf { first: lo, count: ((r >> 32) & 0xff) as u32 };
             }
-            2 => (lo, ((r >> 32) & 0x3fff_ffff) as u32),
-            _ => match self.parts.get(lo as usize) {
+        } else if !leaf_or_part {
+            (lo, ((r >> 32) & 0x3fff_ffff) as u32)
+        } else {
+            match self.parts.get(lo as usize) {
                 // Parts only hang off the top-level tree (checked by `Scene::open`); all ones
                 // is an empty slot.
                 Some(p) if r != ChildRef::EMPTY.0 => (p.root_tile, p.root_node),
                 _ => return Step::Skip,
-            },
+            }
         };
         if let Err(s) = self.open(c, arr) {
             return s;
         }
         // In range: node indices were checked with the tile (`Scene::check_tile`).
         Step::Node(&self.nodes[c.node_base + node as usize], arr)
+    }
+
+    /// Starts loading the node or triangle block that child reference `r` of a node in the
+    /// open array names (its first 256 bytes: a whole node, or a block and most of the next),
+    /// as Embree's traversal does for every child it hits. The far children are popped later
+    /// and find their node in cache; an incoherent ray's misses overlap instead of queueing.
+    /// Only the address is computed: a prefetch never faults and needs no bounds (an absent
+    /// tile's pages are not touched, so a paged tracer never waits for one).
+    #[inline(always)]
+    fn prefetch(&self, c: &Cursor, r: u64) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
+            let lo = r as u32 as usize;
+            let base = self.nodes.as_ptr() as *const u8;
+            // The kind's bits tested as in `step` (no jump table).
+            let at = if (r as i64) >= 0 {
+                if r & (1 << 62) == 0 {
+                    (c.node_base + lo) * NODE_BYTES
+                } else {
+                    (c.block_base + 9 * lo) * 16
+                }
+            } else if r & (1 << 62) == 0 {
+                match self.tiles.get(lo) {
+                    Some(t) => t.offset as usize + ((r >> 32) & 0x3fff_ffff) as usize * NODE_BYTES,
+                    None => return,
+                }
+            } else {
+                return;
+            };
+            let p = base.wrapping_add(at);
+            for line in 0..4 {
+                // SAFETY: a prefetch is a hint with no architectural effect: it never faults,
+                // whatever the address, and reads nothing into the program.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * line) as *const i8) };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = (c, r);
     }
 
     /// Block `blk` of the open tile.
@@ -728,20 +775,29 @@ impl<'s> Tracer<'s> {
         if self.avx2 {
             // SAFETY: `avx2` is set only when the CPU reported AVX2 and FMA (`Isa::detect`,
             // `Isa::available`).
-            return unsafe { self.traverse_avx2(ray, any, from) };
+            return unsafe {
+                match any {
+                    true => self.traverse_avx2::<true>(ray, from),
+                    false => self.traverse_avx2::<false>(ray, from),
+                }
+            };
         }
-        self.traverse_in::<false>(ray, any, from)
+        match any {
+            true => self.traverse_in::<false, true>(ray, from),
+            false => self.traverse_in::<false, false>(ray, from),
+        }
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn traverse_avx2(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
-        self.traverse_in::<true>(ray, any, from)
+    fn traverse_avx2<const ANY: bool>(&self, ray: &Ray, from: Option<Pending>) -> Traced {
+        self.traverse_in::<true, ANY>(ray, from)
     }
 
-    /// The kernel, its box test on AVX2 (`AVX`) or on the baseline's 4-wide SSE.
+    /// The kernel, its box test on AVX2 (`AVX`) or on the baseline's 4-wide SSE; `ANY`: stop
+    /// at the first hit found (shadow rays), children pushed unsorted.
     #[inline(always)]
-    fn traverse_in<const AVX: bool>(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
+    fn traverse_in<const AVX: bool, const ANY: bool>(&self, ray: &Ray, from: Option<Pending>) -> Traced {
         stats::count(|s| s.rays += 1);
         let rb = RayBox::new(ray);
         if from.is_none() && !rb.enters(&self.bounds, ray.t_min, ray.t_max) {
@@ -786,7 +842,7 @@ impl<'s> Tracer<'s> {
                                 t_best = h.t;
                                 let prim = c.first_slot + 4 * blk + lane as u32;
                                 best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: corners(b, lane) });
-                                if any {
+                                if ANY {
                                     return Traced::Done(best);
                                 }
                             }
@@ -799,7 +855,7 @@ impl<'s> Tracer<'s> {
                     Step::Missing(tile) => {
                         let mut stack_out = stack.take_all();
                         stack_out.push(e);
-                        return Traced::Pending(Pending { stack: stack_out, best, any, tile });
+                        return Traced::Pending(Pending { stack: stack_out, best, any: ANY, tile });
                     }
                 };
                 stats::count(|s| s.nodes += 1);
@@ -814,12 +870,14 @@ impl<'s> Tracer<'s> {
                     e = at(k0);
                     continue;
                 }
-                if any {
+                if ANY {
                     // Any hit will do: no order to keep (as Embree's any-hit traversal);
                     // the first child next, the others pushed as they come.
                     let mut m = m1;
                     while m != 0 {
-                        stack.push(at(m.trailing_zeros()));
+                        let x = at(m.trailing_zeros());
+                        self.prefetch(&c, x.r);
+                        stack.push(x);
                         m &= m - 1;
                     }
                     e = at(k0);
@@ -829,6 +887,7 @@ impl<'s> Tracer<'s> {
                 let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
                 let m2 = m1 & (m1 - 1);
                 if m2 == 0 {
+                    self.prefetch(&c, far.r);
                     stack.push(far);
                     e = near;
                     continue;
@@ -850,6 +909,7 @@ impl<'s> Tracer<'s> {
                     n += 1;
                 }
                 for &x in &order[..n - 1] {
+                    self.prefetch(&c, x.r);
                     stack.push(x);
                 }
                 e = order[n - 1];
