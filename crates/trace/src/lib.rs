@@ -443,8 +443,9 @@ pub struct Tracer<'s> {
     vec4: &'s [[f32; 4]],
     /// Index of the top-level tree's first node in `nodes`.
     top_base: usize,
-    /// Whether single rays take the AVX2 box test (chosen once, at creation).
-    avx2: bool,
+    /// The instruction set of the single-ray kernel (chosen once, at creation): the AVX2
+    /// kernel on AVX2 and AVX-512 machines, the baseline's otherwise.
+    isa: packet::Isa,
     /// Where traversals start: the top-level tree's root, or, when the scene has a single
     /// part, that part's root (the top level would only test the part's box again).
     root: Entry,
@@ -501,7 +502,7 @@ impl<'s> Tracer<'s> {
             nodes: scene.node_pool(),
             vec4: scene.vec4_pool(),
             top_base: scene.header().top_nodes_off as usize / NODE_BYTES,
-            avx2: packet::Isa::detect() != packet::Isa::Baseline,
+            isa: packet::Isa::detect(),
             bounds: scene.header().bounds,
             root: match scene.parts().len() {
                 1 => Entry { r: ChildRef::part(0).0, ..Entry::ROOT },
@@ -514,7 +515,7 @@ impl<'s> Tracer<'s> {
     /// for tests and benchmarks that compare the paths. [`Tracer::new`] picks the best one.
     pub fn with_isa(mut self, isa: packet::Isa) -> Tracer<'s> {
         assert!(packet::Isa::available().contains(&isa), "{isa:?} is not available on this machine");
-        self.avx2 = isa != packet::Isa::Baseline;
+        self.isa = isa;
         self
     }
 
@@ -772,15 +773,17 @@ impl<'s> Tracer<'s> {
     /// Leaves are children like any other, so they too are tested nearest first.
     fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
         #[cfg(target_arch = "x86_64")]
-        if self.avx2 {
-            // SAFETY: `avx2` is set only when the CPU reported AVX2 and FMA (`Isa::detect`,
-            // `Isa::available`).
-            return unsafe {
-                match any {
+        match self.isa {
+            // SAFETY: `isa` is one that the CPU reported (`Isa::detect`, `Isa::available`).
+            // AVX-512 machines run the AVX2 single-ray kernel: built with AVX-512's 32
+            // registers, the same kernel measured slower.
+            packet::Isa::Avx2 | packet::Isa::Avx512 => unsafe {
+                return match any {
                     true => self.traverse_avx2::<true>(ray, from),
                     false => self.traverse_avx2::<false>(ray, from),
-                }
-            };
+                };
+            },
+            packet::Isa::Baseline => {}
         }
         match any {
             true => self.traverse_in::<false, true>(ray, from),

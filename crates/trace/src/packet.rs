@@ -26,6 +26,16 @@ pub enum Isa {
     Avx512,
 }
 
+/// What the AVX-512 kernels need: the foundation, 256-bit forms with 32 registers (VL), and
+/// AVX2 and FMA beside them.
+#[cfg(target_arch = "x86_64")]
+fn avx512() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+        && std::arch::is_x86_feature_detected!("avx2")
+        && std::arch::is_x86_feature_detected!("fma")
+}
+
 impl Isa {
     /// The best instruction set this machine has (decided once, then cached).
     pub fn detect() -> Isa {
@@ -33,7 +43,7 @@ impl Isa {
         *ISA.get_or_init(|| {
             #[cfg(target_arch = "x86_64")]
             {
-                if std::arch::is_x86_feature_detected!("avx512f") {
+                if avx512() {
                     return Isa::Avx512;
                 }
                 if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
@@ -54,7 +64,7 @@ impl Isa {
                 if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
                     v.push(Isa::Avx2);
                 }
-                if std::arch::is_x86_feature_detected!("avx512f") {
+                if avx512() {
                     v.push(Isa::Avx512);
                 }
             }
