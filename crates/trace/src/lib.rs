@@ -632,8 +632,9 @@ impl<'s> Tracer<'s> {
 
     /// Starts loading the node or triangle block that child reference `r` of a node in the
     /// open array names (its first 256 bytes: a whole node, or a block and most of the next),
-    /// as Embree's traversal does for every child it hits. The far children are popped later
-    /// and find their node in cache; an incoherent ray's misses overlap instead of queueing.
+    /// as Embree's traversal does for the children it hits. Called for the children pushed
+    /// (the nearest is loaded next anyway): they are popped later and find their data in
+    /// cache, so an incoherent ray's misses overlap instead of queueing.
     /// Only the address is computed: a prefetch never faults and needs no bounds (an absent
     /// tile's pages are not touched, so a paged tracer never waits for one).
     #[inline(always)]
