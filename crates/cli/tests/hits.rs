@@ -187,7 +187,8 @@ fn packet_kernels_equal_single_rays() {
 
 /// The single-ray kernel on every instruction set this machine has (the box test in AVX2 or
 /// in baseline SSE) gives the same closest hits, bit for bit, and the same any-hit answers:
-/// on random rays, camera rays, and rays aimed exactly at vertices and edge midpoints.
+/// on random rays, camera rays, and rays aimed exactly at vertices and edge midpoints; and
+/// again with the traversal stack overflowing into its spill.
 #[test]
 fn single_ray_kernels_agree_across_isas() {
     use megaray_trace::packet::Isa;
@@ -224,5 +225,16 @@ fn single_ray_kernels_agree_across_isas() {
         let got: Vec<_> = rays.par_iter().map(|r| (key(tracer.intersect(r)), tracer.occluded(r))).collect();
         let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
         assert_eq!(bad, 0, "{isa:?}: {bad} of {} rays differ from the baseline kernel", rays.len());
+        // The same with the stack full at the first node, so that entries spill to the heap
+        // and come back (as a tree deeper than the fixed stack would make them).
+        for pad in [60, 300] {
+            let got: Vec<_> = rays
+                .par_iter()
+                .step_by(5)
+                .map(|r| (key(tracer.trace_padded(r, false, pad)), tracer.trace_padded(r, true, pad).is_some()))
+                .collect();
+            let bad = want.iter().step_by(5).zip(&got).filter(|(w, g)| w != g).count();
+            assert_eq!(bad, 0, "{isa:?}, {pad} entries padded: {bad} rays differ from the unpadded kernel");
+        }
     }
 }

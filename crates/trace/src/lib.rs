@@ -23,11 +23,12 @@ pub mod jobs;
 pub mod packet;
 pub mod stats;
 
-use glam::Vec4;
+use glam::{Vec3A, Vec4};
 use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
 use megaray_page::{Access, Pager};
 use megaray_scene::format::{ChildRef, Node8, NODE_BYTES, NODE_WIDTH};
 use megaray_scene::{PartEntry, Scene, TileEntry};
+use std::cell::RefCell;
 
 /// A closest hit.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -88,8 +89,9 @@ impl RayCaster for &Tracer<'_> {
 
 /// Which node array a stack entry refers to.
 const TOP: u32 = u32::MAX;
-/// Capacity of the traversal stack kept on the machine stack.
-const STACK: usize = 32;
+/// Capacity of the single-ray kernel's traversal stack on the machine stack ([`Walk::fixed`]);
+/// deeper stacks spill to the heap.
+const STACK: usize = 64;
 
 /// Conservative widening of box exit distances so that boxes never cull a hit that the
 /// watertight triangle test would find (Ize 2013: 1 + 2 gamma(3)).
@@ -113,48 +115,6 @@ impl Entry {
     const ZERO: Entry = Entry { r: 0, arr: 0, t: 0.0 };
 }
 
-/// The traversal stack: [`STACK`] entries on the machine stack, then a heap spill (only for
-/// pathologically deep trees: which entries spill does not matter for correctness).
-struct Stack<'a> {
-    fixed: &'a mut [Entry; STACK],
-    sp: usize,
-    spill: Vec<Entry>,
-}
-
-impl Stack<'_> {
-    #[inline(always)]
-    fn new(fixed: &mut [Entry; STACK]) -> Stack<'_> {
-        Stack { fixed, sp: 0, spill: Vec::new() }
-    }
-
-    #[inline(always)]
-    fn push(&mut self, e: Entry) {
-        if self.sp < STACK {
-            self.fixed[self.sp] = e;
-            self.sp += 1;
-        } else {
-            self.spill.push(e);
-        }
-    }
-
-    #[inline(always)]
-    fn pop(&mut self) -> Option<Entry> {
-        if self.sp > 0 {
-            self.sp -= 1;
-            Some(self.fixed[self.sp])
-        } else {
-            self.spill.pop()
-        }
-    }
-
-    /// The entries, bottom first (for [`Pending`]).
-    fn take_all(&mut self) -> Vec<Entry> {
-        let mut v = std::mem::take(&mut self.spill);
-        v.extend_from_slice(&self.fixed[..self.sp]);
-        v
-    }
-}
-
 /// What a popped [`Entry`] turned out to be, its tile opened.
 enum Step<'a> {
     /// An inner node to test, in node array `arr`.
@@ -173,41 +133,55 @@ const W: usize = NODE_WIDTH;
 /// Precomputed per-ray values for box tests: the eight slots of a [`Node8`] are tested at
 /// once, as one 8-wide AVX pass ([`RayBox::test_avx2`]) or two 4-wide SSE halves
 /// ([`RayBox::test_sse`], the baseline and reference). The near and far planes of each axis are
-/// chosen once per ray from the direction's signs, as indices into the node's six plane rows
-/// (`lo_x, hi_x, lo_y, hi_y, lo_z, hi_z`), so the test has no branches.
+/// chosen once per ray from the direction's signs, as byte offsets of the node's six plane
+/// rows (`lo_x, hi_x, lo_y, hi_y, lo_z, hi_z`, 32 bytes each), so the test has no branches.
 struct RayBox {
     org: [f32; 3],
     inv: [f32; 3],
-    /// Per axis: the row ([`Node8::planes`]) of the near plane; the far plane is the other
-    /// one of the pair (`near ^ 1`).
-    near: [usize; 3],
+    /// Byte offsets in a [`Node8`] of the rows ([`Node8::planes`]) of the near planes of x, y
+    /// and z, then of the far planes: `32 * row`, the row of a far plane being the other one
+    /// of its pair. Always one of 0, 32, .., 160 (the AVX test reads through them unchecked).
+    rows: [usize; 6],
 }
 
 impl RayBox {
+    #[inline(always)]
     fn new(r: &Ray) -> RayBox {
         // Direction components of (nearly) zero become +-1e-20: finite reciprocals, so that no
         // 0 * inf makes a NaN in the slab distances.
         let fix = |d: f32| d.abs().max(1e-20).copysign(d);
         let inv = [1.0 / fix(r.dir.x), 1.0 / fix(r.dir.y), 1.0 / fix(r.dir.z)];
-        RayBox {
-            org: r.org.into(),
-            inv,
-            near: [(inv[0] < 0.0) as usize, 2 + (inv[1] < 0.0) as usize, 4 + (inv[2] < 0.0) as usize],
-        }
+        RayBox { org: r.org.into(), inv, rows: RayBox::rows(RayBox::octant(r)) }
     }
 
-    /// Whether the ray enters box `b` within `[t0, t1]`: one box, scalar, with the same slab
-    /// products and widening as the slot tests (and so never stricter than them).
+    /// The ray's octant: bit `k` set when the direction's component `k` is negative (its
+    /// sign bit set: `-0.0` is negative, as its reciprocal in [`RayBox::new`] is).
+    #[inline(always)]
+    fn octant(r: &Ray) -> usize {
+        let d = r.dir;
+        d.x.is_sign_negative() as usize
+            | (d.y.is_sign_negative() as usize) << 1
+            | (d.z.is_sign_negative() as usize) << 2
+    }
+
+    /// [`RayBox::rows`] of rays in octant `oct`: the near plane of an axis is its high one
+    /// when the direction is negative along it.
+    #[inline(always)]
+    const fn rows(oct: usize) -> [usize; 6] {
+        let near = [oct & 1, 2 + ((oct >> 1) & 1), 4 + ((oct >> 2) & 1)];
+        [32 * near[0], 32 * near[1], 32 * near[2], 32 * (near[0] ^ 1), 32 * (near[1] ^ 1), 32 * (near[2] ^ 1)]
+    }
+
+    /// Whether the ray enters box `b` within `[t0, t1]`: one box, its three slabs at once,
+    /// with the same slab products and widening as the slot tests (and so never stricter than
+    /// them; no NaN arises, so `min` and `max` pick the near and far planes alike).
     #[inline(always)]
     fn enters(&self, b: &megaray_base::Aabb, t0: f32, t1: f32) -> bool {
-        let mut tn = t0;
-        let mut tf = t1;
-        for k in 0..3 {
-            let lo = (b.min[k] - self.org[k]) * self.inv[k];
-            let hi = (b.max[k] - self.org[k]) * self.inv[k];
-            tn = fmax(fmin(lo, hi), tn);
-            tf = fmin(fmax(lo, hi), tf);
-        }
+        let (o, inv) = (Vec3A::from_array(self.org), Vec3A::from_array(self.inv));
+        let lo = (Vec3A::from_array(b.min) - o) * inv;
+        let hi = (Vec3A::from_array(b.max) - o) * inv;
+        let tn = lo.min(hi).max_element().max(t0);
+        let tf = lo.max(hi).min_element().min(t1);
         tn <= tf * BOX_EPS
     }
 
@@ -218,8 +192,8 @@ impl RayBox {
     fn test<const AVX: bool>(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
         #[cfg(target_arch = "x86_64")]
         if AVX {
-            // SAFETY: `AVX` kernels are only instantiated inside `traverse_avx2`, which runs
-            // only on CPUs with AVX2 and FMA.
+            // SAFETY: `AVX` box tests are only instantiated inside `Tracer::walk_avx2`, which
+            // runs only on CPUs with AVX2 and FMA (`Tracer::traverse`).
             return unsafe { self.test_avx2(n, t0, t1) };
         }
         self.test_sse(n, t0, t1)
@@ -234,9 +208,10 @@ impl RayBox {
     #[inline]
     fn test_avx2(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
         use std::arch::x86_64::*;
-        let planes = n.planes();
-        // SAFETY: each row is eight readable f32s.
-        let ld = |k: usize, far: usize| unsafe { _mm256_loadu_ps(planes[(self.near[k] ^ far) & 7].as_ptr()) };
+        let base = (n as *const Node8).cast::<u8>();
+        // SAFETY: every offset in `rows` is that of one of the node's rows of eight f32s (set
+        // only by `RayBox::new`).
+        let ld = |k: usize, far: usize| unsafe { _mm256_loadu_ps(base.add(self.rows[3 * far + k]).cast::<f32>()) };
         let o = self.org.map(|x| _mm256_set1_ps(x));
         let ninv = self.inv.map(|x| _mm256_set1_ps(-x));
         let q = |k: usize, far: usize| _mm256_mul_ps(_mm256_sub_ps(o[k], ld(k, far)), ninv[k]);
@@ -255,7 +230,7 @@ impl RayBox {
     fn test_sse(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
         let planes = n.planes();
         // `& 7`: in range by construction, and the compiler sees it.
-        let row = |k: usize, far: usize| &planes[(self.near[k] ^ far) & 7];
+        let row = |k: usize, far: usize| &planes[(self.rows[3 * far + k] / 32) & 7];
         let (nx, ny, nz) = (row(0, 0), row(1, 0), row(2, 0));
         let (fx, fy, fz) = (row(0, 1), row(1, 1), row(2, 1));
         let o = self.org.map(Vec4::splat);
@@ -309,6 +284,10 @@ fn corners(v: &Block, lane: usize) -> [[f32; 3]; 3] {
     [[v[0][lane], v[1][lane], v[2][lane]], [v[3][lane], v[4][lane], v[5][lane]], [v[6][lane], v[7][lane], v[8][lane]]]
 }
 
+/// A block that [`RayTri4::try_test`] leaves to the double-precision reference.
+#[derive(Clone, Copy, Debug)]
+struct Exact;
+
 /// Per-ray constants of the 4-wide watertight test (the lanes of a [`Block`] at once).
 /// Each lane computes exactly what [`WatertightRay::intersect`] computes, operation for
 /// operation, so results are bit-identical to the scalar reference.
@@ -320,6 +299,7 @@ struct RayTri4 {
 }
 
 impl RayTri4 {
+    #[inline(always)]
     fn new(r: &Ray) -> RayTri4 {
         let wt = WatertightRay::new(r);
         let [kx, ky, kz] = wt.k;
@@ -334,6 +314,14 @@ impl RayTri4 {
     /// The nearest hit among the lanes of `b` set in `lanes`, in `[t_min, t_max)`.
     #[inline(always)]
     fn test(&self, b: &Block, lanes: u32, t_max: f32) -> Option<(usize, TriHit)> {
+        self.try_test(b, lanes, t_max).unwrap_or_else(|Exact| self.scalar(b, lanes, t_max))
+    }
+
+    /// [`RayTri4::test`] where it needs no double precision; [`Exact`] when an edge or vertex
+    /// of a lane lies exactly on the ray, for [`RayTri4::scalar`] to decide (rare: the
+    /// single-ray kernel handles it outside its hot loop).
+    #[inline(always)]
+    fn try_test(&self, b: &Block, lanes: u32, t_max: f32) -> Result<Option<(usize, TriHit)>, Exact> {
         // One body per axis permutation, so that the rows it reads are constants (no index
         // arithmetic or bounds checks per block); the permutation is fixed per ray.
         match self.wt.k {
@@ -344,7 +332,7 @@ impl RayTri4 {
             [0, 1, 2] => self.test_k::<0, 1, 2>(b, lanes, t_max),
             [1, 0, 2] => self.test_k::<1, 0, 2>(b, lanes, t_max),
             // `WatertightRay::new` makes no other permutation.
-            _ => self.scalar(b, lanes, t_max),
+            _ => Err(Exact),
         }
     }
 
@@ -355,7 +343,7 @@ impl RayTri4 {
         b: &Block,
         lanes: u32,
         t_max: f32,
-    ) -> Option<(usize, TriHit)> {
+    ) -> Result<Option<(usize, TriHit)>, Exact> {
         let (kx, ky, kz) = (KX, KY, KZ);
         let [ox, oy, oz] = self.o;
         let [sx, sy, sz] = self.s;
@@ -377,14 +365,16 @@ impl RayTri4 {
         let zero = (u.cmpeq(z) | vv.cmpeq(z) | w.cmpeq(z)).bitmask() & lanes;
         if zero != 0 {
             // An edge or vertex exactly on the ray: the reference's double-precision path.
-            return self.scalar(b, lanes, t_max);
+            return Err(Exact);
         }
-        let neg = u.cmplt(z) | vv.cmplt(z) | w.cmplt(z);
-        let pos = u.cmpgt(z) | vv.cmpgt(z) | w.cmpgt(z);
-        let inside = lanes & !(neg & pos).bitmask();
+        // No lane of `lanes` has a zero among its edge functions, so they agree in sign (the
+        // reference's `(u < 0 || v < 0 || w < 0) && (u > 0 || ..)` is false) exactly when
+        // their sign bits do.
+        let (su, sv, sw) = (u.is_negative_bitmask(), vv.is_negative_bitmask(), w.is_negative_bitmask());
+        let inside = lanes & !((su ^ sv) | (su ^ sw));
         if inside == 0 {
             // The usual outcome: no lane's edge functions agree in sign (no division needed).
-            return None;
+            return Ok(None);
         }
         let det = u + vv + w;
         let t_scaled = u * (sz * az) + vv * (sz * bz) + w * (sz * cz);
@@ -392,7 +382,7 @@ impl RayTri4 {
         let t = t_scaled * inv_det;
         let ok = inside & (det.cmpne(z) & t.cmpge(self.t_min) & t.cmplt(Vec4::splat(t_max))).bitmask();
         if ok == 0 {
-            return None;
+            return Ok(None);
         }
         let mut lane = ok.trailing_zeros() as usize;
         let mut rest = ok & (ok - 1);
@@ -403,7 +393,7 @@ impl RayTri4 {
                 lane = l;
             }
         }
-        Some((lane, TriHit { t: t[lane], u: vv[lane] * inv_det[lane], v: w[lane] * inv_det[lane] }))
+        Ok(Some((lane, TriHit { t: t[lane], u: vv[lane] * inv_det[lane], v: w[lane] * inv_det[lane] })))
     }
 
     /// The reference test lane by lane.
@@ -694,26 +684,26 @@ impl<'s> Tracer<'s> {
     /// The closest hit of `ray`, or [`Traced::Pending`] when it needs an absent tile.
     /// Paged tracers: call under a pin ([`Pager::pin`]).
     pub fn try_intersect(&self, ray: &Ray) -> Traced {
-        self.traverse(ray, false, None)
+        self.traverse(ray, false, None, 0)
     }
 
     /// Any hit of `ray` (`Done(Some(_))` means occluded), or [`Traced::Pending`].
     /// Paged tracers: call under a pin ([`Pager::pin`]).
     pub fn try_occluded(&self, ray: &Ray) -> Traced {
-        self.traverse(ray, true, None)
+        self.traverse(ray, true, None, 0)
     }
 
     /// Continues a pending traversal of the same `ray` (same query kind) where it stopped.
     pub fn resume(&self, ray: &Ray, pending: Pending) -> Traced {
         let any = pending.any;
-        self.traverse(ray, any, Some(pending))
+        self.traverse(ray, any, Some(pending), 0)
     }
 
     /// Traces to the end, waiting for missing tiles (pinned only while traversing).
     #[inline]
     fn blocking(&self, ray: &Ray, any: bool) -> Option<Hit> {
         let Some(pager) = self.pager else {
-            return match self.traverse(ray, any, None) {
+            return match self.traverse(ray, any, None, 0) {
                 Traced::Done(h) => h,
                 Traced::Pending(_) => unreachable!("an unpaged tracer never suspends"),
             };
@@ -723,7 +713,7 @@ impl<'s> Tracer<'s> {
             let seen = pager.arrivals();
             let r = {
                 let _pin = pager.pin();
-                self.traverse(ray, any, from.take())
+                self.traverse(ray, any, from.take(), 0)
             };
             match r {
                 Traced::Done(h) => return h,
@@ -769,105 +759,291 @@ impl<'s> Tracer<'s> {
         });
     }
 
-    /// The single-ray kernel. Near-first: of the children a node's box test hits, the
-    /// nearest is visited next without touching the stack, the others are pushed far to near.
-    /// Leaves are children like any other, so they too are tested nearest first.
-    fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>) -> Traced {
+    /// [`Tracer::intersect`] (or, `any`, [`Tracer::occluded`]) of an unpaged tracer with
+    /// `pad` empty entries under the root on the traversal stack, enough of them to fill it
+    /// at the first node: the hits must be those of the unpadded query. For the tests of the
+    /// stack's spill, which no real tree deep enough to need it would test as surely.
+    #[doc(hidden)]
+    pub fn trace_padded(&self, ray: &Ray, any: bool, pad: usize) -> Option<Hit> {
+        assert!(self.pager.is_none(), "padded traces are for unpaged tracers");
+        match self.traverse(ray, any, None, pad) {
+            Traced::Done(h) => h,
+            Traced::Pending(_) => unreachable!("an unpaged tracer never suspends"),
+        }
+    }
+
+    /// The single-ray kernel on this tracer's instruction set (see [`Tracer::walk`]), `pad`
+    /// as in [`Tracer::trace_padded`] (0 but in tests).
+    fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>, pad: usize) -> Traced {
         #[cfg(target_arch = "x86_64")]
         match self.isa {
-            // SAFETY: `isa` is one that the CPU reported (`Isa::detect`, `Isa::available`).
+            // `isa` is one that the CPU reported (`Isa::detect`, `Isa::available`).
             // AVX-512 machines run the AVX2 single-ray kernel: built with AVX-512's 32
             // registers, the same kernel measured slower.
-            packet::Isa::Avx2 | packet::Isa::Avx512 => unsafe {
+            packet::Isa::Avx2 | packet::Isa::Avx512 => {
                 return match any {
-                    true => self.traverse_avx2::<true>(ray, from),
-                    false => self.traverse_avx2::<false>(ray, from),
+                    true => self.traverse_in::<true, true>(ray, from, pad),
+                    false => self.traverse_in::<true, false>(ray, from, pad),
                 };
-            },
+            }
             packet::Isa::Baseline => {}
         }
         match any {
-            true => self.traverse_in::<false, true>(ray, from),
-            false => self.traverse_in::<false, false>(ray, from),
+            true => self.traverse_in::<false, true>(ray, from, pad),
+            false => self.traverse_in::<false, false>(ray, from, pad),
         }
+    }
+
+    /// The kernel's driver, its box test on AVX2 (`AVX`) or on the baseline's 4-wide SSE;
+    /// `ANY`: stop at the first hit found (shadow rays). It sets the ray up, runs the hot loop
+    /// ([`Tracer::walk`]) and handles the rare [`Event`]s it returns, then runs it again.
+    #[inline(always)]
+    fn traverse_in<const AVX: bool, const ANY: bool>(&self, ray: &Ray, from: Option<Pending>, pad: usize) -> Traced {
+        stats::count(|s| s.rays += 1);
+        if from.is_none() && !RayBox::new(ray).enters(&self.bounds, ray.t_min, ray.t_max) {
+            // Most rays of a wide view miss the whole scene: no traversal set up for them.
+            return Traced::Done(None);
+        }
+        thread_local! {
+            /// Each thread's stack for the single-ray kernel, kept from ray to ray (not made
+            /// and zeroed for each).
+            static FIXED: RefCell<[Entry; STACK]> = const { RefCell::new([Entry::ZERO; STACK]) };
+        }
+        FIXED.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut fixed) => self.drive::<AVX, ANY>(ray, from, pad, &mut fixed),
+            // Taken (never, since traversals do not nest, but a fresh one is as good).
+            Err(_) => self.drive::<AVX, ANY>(ray, from, pad, &mut [Entry::ZERO; STACK]),
+        })
+    }
+
+    /// [`Tracer::traverse_in`] with a stack.
+    #[inline(always)]
+    fn drive<const AVX: bool, const ANY: bool>(
+        &self,
+        ray: &Ray,
+        from: Option<Pending>,
+        pad: usize,
+        fixed: &mut [Entry; STACK],
+    ) -> Traced {
+        let mut w = Walk { fixed, sp: 0, next: Some(self.root), c: self.top_cursor(), t_best: ray.t_max, best: None };
+        // Entries below the fixed stack, bottom first: only deep trees and resumed rays have any.
+        let mut spill = Vec::new();
+        if let Some(p) = from {
+            w.next = None;
+            w.best = p.best;
+            w.t_best = p.best.map_or(ray.t_max, |h| h.t);
+            spill = p.stack;
+        }
+        if pad > 0 {
+            // One entry more than leaves room for a node's children, the rest below them.
+            let empty = Entry { r: ChildRef::EMPTY.0, arr: TOP, t: f32::NEG_INFINITY };
+            w.sp = pad.min(STACK - W + 1);
+            w.fixed[..w.sp].fill(empty);
+            spill.resize(pad - w.sp, empty);
+        }
+        loop {
+            match self.walk_on::<AVX, ANY>(&mut w, ray) {
+                Event::Hit => return Traced::Done(w.best),
+                Event::Empty => {
+                    if spill.is_empty() {
+                        return Traced::Done(w.best);
+                    }
+                    // The top of the spill becomes the fixed stack.
+                    let n = spill.len().min(STACK / 2);
+                    let rest = spill.len() - n;
+                    w.fixed[..n].copy_from_slice(&spill[rest..]);
+                    spill.truncate(rest);
+                    w.sp = n;
+                }
+                Event::Full => {
+                    // The bottom half of the fixed stack goes to the spill.
+                    let n = STACK / 2;
+                    spill.extend_from_slice(&w.fixed[..n]);
+                    w.fixed.copy_within(n..w.sp, 0);
+                    w.sp -= n;
+                }
+                Event::Enter(arr) => match self.enter(&mut w.c, arr) {
+                    Ok(()) => {}
+                    Err(Step::Missing(tile)) => {
+                        spill.extend_from_slice(&w.fixed[..w.sp]);
+                        spill.extend(w.next);
+                        return Traced::Pending(Pending { stack: spill, best: w.best, any: ANY, tile });
+                    }
+                    // A corrupt tile: what needed it is skipped.
+                    Err(_) => w.next = None,
+                },
+                Event::Exact { first, count } => {
+                    // The rest of the leaf by the double-precision reference (which gives
+                    // the fast test's results wherever that one decides).
+                    let rt = RayTri4::new(ray);
+                    let (mut blk, mut left) = (first, count);
+                    while left > 0 {
+                        let b = self.block(&w.c, blk);
+                        if let Some((lane, h)) = rt.scalar(b, lanes(left), w.t_best) {
+                            w.t_best = h.t;
+                            w.best = Some(w.c.hit(h, blk, lane, b));
+                            if ANY {
+                                return Traced::Done(w.best);
+                            }
+                        }
+                        left = left.saturating_sub(4);
+                        blk += 1;
+                    }
+                }
+            }
+        }
+    }
+
+    /// [`Tracer::walk`] compiled for the driver's instruction set: a function of its own,
+    /// never inlined, so that its registers are allocated for the loop alone.
+    #[inline(always)]
+    fn walk_on<const AVX: bool, const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        #[cfg(target_arch = "x86_64")]
+        if AVX {
+            // One kernel per octant: the rows of the near and far planes are then constants,
+            // memory operands of the box test rather than six offsets held in registers.
+            // SAFETY: `AVX` drivers only run when `isa` says the CPU has AVX2 and FMA
+            // (`Tracer::traverse`).
+            return unsafe {
+                match RayBox::octant(ray) {
+                    0 => self.walk_avx2::<ANY, 0>(w, ray),
+                    1 => self.walk_avx2::<ANY, 1>(w, ray),
+                    2 => self.walk_avx2::<ANY, 2>(w, ray),
+                    3 => self.walk_avx2::<ANY, 3>(w, ray),
+                    4 => self.walk_avx2::<ANY, 4>(w, ray),
+                    5 => self.walk_avx2::<ANY, 5>(w, ray),
+                    6 => self.walk_avx2::<ANY, 6>(w, ray),
+                    _ => self.walk_avx2::<ANY, 7>(w, ray),
+                }
+            };
+        }
+        self.walk_baseline::<ANY>(w, ray)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn traverse_avx2<const ANY: bool>(&self, ray: &Ray, from: Option<Pending>) -> Traced {
-        self.traverse_in::<true, ANY>(ray, from)
+    #[inline(never)]
+    fn walk_avx2<const ANY: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        self.walk::<true, ANY, OCT>(w, ray)
     }
 
-    /// The kernel, its box test on AVX2 (`AVX`) or on the baseline's 4-wide SSE; `ANY`: stop
-    /// at the first hit found (shadow rays), children pushed unsorted.
+    #[inline(never)]
+    fn walk_baseline<const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        self.walk::<false, ANY, { usize::MAX }>(w, ray)
+    }
+
+    /// The hot loop of the single-ray kernel. Near-first: of the children a node's box test
+    /// hits, the nearest is visited next without touching the stack, the others are pushed
+    /// far to near (unsorted for `ANY`). Leaves are children like any other, so they too are
+    /// tested nearest first.
+    ///
+    /// It calls no function (all it uses is inlined, bounds checks aside, which never
+    /// return): a call would clobber every vector register, and the compiler would then keep
+    /// the ray's constants on the machine stack and reload them at every node (measured: 1.9x
+    /// Embree's instructions per ray before this split). What is rare returns to the driver
+    /// as an [`Event`], the walk's state saved in `w`: entering a tile that is paged or not
+    /// checked yet, an edge exactly on the ray, a full or empty fixed stack, an any-hit.
     #[inline(always)]
-    fn traverse_in<const AVX: bool, const ANY: bool>(&self, ray: &Ray, from: Option<Pending>) -> Traced {
-        stats::count(|s| s.rays += 1);
-        let rb = RayBox::new(ray);
-        if from.is_none() && !rb.enters(&self.bounds, ray.t_min, ray.t_max) {
-            // Most rays of a wide view miss the whole scene: no traversal set up for them.
-            return Traced::Done(None);
+    fn walk<const AVX: bool, const ANY: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        // The ray's constants, made here rather than passed in: the loop then holds them in
+        // registers without a copy (events are rare, and the few that come back remake them).
+        let mut rb = RayBox::new(ray);
+        if OCT < 8 {
+            // The ray's octant (`walk_on` chose this kernel by it), as a constant.
+            rb.rows = RayBox::rows(OCT);
         }
-        // The triangle test's constants, made when the ray first reaches a leaf (most rays
-        // of a wide view never do).
-        let mut rt: Option<RayTri4> = None;
-        let mut best: Option<Hit> = None;
-        let mut t_best = ray.t_max;
-        let mut fixed = [Entry::ZERO; STACK];
-        let mut stack = Stack::new(&mut fixed);
-        match from {
-            Some(p) => {
-                best = p.best;
-                t_best = best.map_or(ray.t_max, |h| h.t);
-                for e in p.stack {
-                    stack.push(e);
+        let rt = RayTri4::new(ray);
+        let t_min = ray.t_min;
+        let mut c = w.c;
+        let mut sp = w.sp;
+        let mut t_best = w.t_best;
+        let mut next = w.next.take();
+        let event = 'walk: loop {
+            let mut e = match next.take() {
+                Some(e) => e,
+                None => {
+                    if sp == 0 {
+                        break Event::Empty;
+                    }
+                    sp -= 1;
+                    let e = w.fixed[sp];
+                    if e.t > t_best * BOX_EPS {
+                        continue;
+                    }
+                    e
                 }
-            }
-            None => stack.push(self.root),
-        }
-        let mut c = self.top_cursor();
-        'pop: while let Some(mut e) = stack.pop() {
-            if e.t > t_best * BOX_EPS {
-                continue;
-            }
+            };
             // Descend from `e`, always into the nearest child hit.
             loop {
-                let (node, arr) = match self.step(&mut c, &e) {
-                    Step::Node(n, arr) => (n, arr),
-                    Step::Leaf { first, count } => {
-                        let rt = rt.get_or_insert_with(|| RayTri4::new(ray));
-                        let mut left = count;
-                        let mut blk = first;
-                        while left > 0 {
-                            let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
-                            let b = self.block(&c, blk);
-                            stats::count(|s| s.blocks += 1);
-                            if let Some((lane, h)) = rt.test(b, lanes, t_best) {
-                                t_best = h.t;
-                                let prim = c.first_slot + 4 * blk + lane as u32;
-                                best = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: corners(b, lane) });
-                                if ANY {
-                                    return Traced::Done(best);
-                                }
-                            }
-                            left = left.saturating_sub(4);
-                            blk += 1;
-                        }
-                        continue 'pop;
-                    }
-                    Step::Skip => continue 'pop,
-                    Step::Missing(tile) => {
-                        let mut stack_out = stack.take_all();
-                        stack_out.push(e);
-                        return Traced::Pending(Pending { stack: stack_out, best, any: ANY, tile });
+                // `ChildRef::decode`, written out, its kind's two bits tested one at a time in
+                // order of frequency (as a `match`, the compiler jumps through a table, an
+                // indirect branch that predicts worse). An empty slot is caught with the parts.
+                let r = e.r;
+                let lo = r as u32;
+                let leaf_or_part = r & (1 << 62) != 0;
+                let (arr, node) = if (r as i64) >= 0 {
+                    (e.arr, lo)
+                } else if !leaf_or_part {
+                    (lo, ((r >> 32) & 0x3fff_ffff) as u32)
+                } else {
+                    match self.parts.get(lo as usize) {
+                        // Parts only hang off the top-level tree (checked by `Scene::open`);
+                        // all ones is an empty slot.
+                        Some(p) if r != ChildRef::EMPTY.0 => (p.root_tile, p.root_node),
+                        _ => continue 'walk,
                     }
                 };
+                if arr != c.arr {
+                    if arr == TOP {
+                        c = self.top_cursor();
+                    } else if self.pager.is_none() && self.scene.tile_checked(arr) {
+                        // The common crossing: an unpaged tile already checked.
+                        self.view(&mut c, arr);
+                    } else {
+                        next = Some(e);
+                        break 'walk Event::Enter(arr);
+                    }
+                }
+                if (r as i64) >= 0 && leaf_or_part {
+                    // A leaf: `count` triangles from block `lo` of the open tile.
+                    let (mut blk, mut left) = (lo, ((r >> 32) & 0xff) as u32);
+                    while left > 0 {
+                        let b = self.block(&c, blk);
+                        stats::count(|s| s.blocks += 1);
+                        match rt.try_test(b, lanes(left), t_best) {
+                            Ok(None) => {}
+                            Ok(Some((lane, h))) => {
+                                t_best = h.t;
+                                w.best = Some(c.hit(h, blk, lane, b));
+                                if ANY {
+                                    break 'walk Event::Hit;
+                                }
+                            }
+                            Err(Exact) => break 'walk Event::Exact { first: blk, count: left },
+                        }
+                        left = left.saturating_sub(4);
+                        blk += 1;
+                    }
+                    continue 'walk;
+                }
+                if sp > STACK - W {
+                    // No room for seven more entries.
+                    next = Some(e);
+                    break 'walk Event::Full;
+                }
+                // In range: node indices were checked with the tile (`Scene::check_tile`).
+                let node = &self.nodes[c.node_base + node as usize];
                 stats::count(|s| s.nodes += 1);
-                let (dist, mask) = rb.test::<AVX>(node, ray.t_min, t_best);
+                let (dist, mask) = rb.test::<AVX>(node, t_min, t_best);
                 if mask == 0 {
-                    continue 'pop;
+                    continue 'walk;
                 }
                 let at = |k: u32| Entry { r: node.child[k as usize], arr, t: dist[k as usize] };
+                let mut push = |x: Entry| {
+                    self.prefetch(&c, x.r);
+                    w.fixed[sp] = x;
+                    sp += 1;
+                };
                 let k0 = mask.trailing_zeros();
                 let m1 = mask & (mask - 1);
                 if m1 == 0 {
@@ -879,9 +1055,7 @@ impl<'s> Tracer<'s> {
                     // the first child next, the others pushed as they come.
                     let mut m = m1;
                     while m != 0 {
-                        let x = at(m.trailing_zeros());
-                        self.prefetch(&c, x.r);
-                        stack.push(x);
+                        push(at(m.trailing_zeros()));
                         m &= m - 1;
                     }
                     e = at(k0);
@@ -891,8 +1065,7 @@ impl<'s> Tracer<'s> {
                 let (near, far) = if b.t < a.t { (b, a) } else { (a, b) };
                 let m2 = m1 & (m1 - 1);
                 if m2 == 0 {
-                    self.prefetch(&c, far.r);
-                    stack.push(far);
+                    push(far);
                     e = near;
                     continue;
                 }
@@ -913,13 +1086,71 @@ impl<'s> Tracer<'s> {
                     n += 1;
                 }
                 for &x in &order[..n - 1] {
-                    self.prefetch(&c, x.r);
-                    stack.push(x);
+                    push(x);
                 }
                 e = order[n - 1];
             }
+        };
+        w.c = c;
+        w.sp = sp;
+        w.t_best = t_best;
+        w.next = next;
+        event
+    }
+}
+
+/// The lanes of a block that hold triangles, when `left` triangles of a leaf remain.
+#[inline(always)]
+fn lanes(left: u32) -> u32 {
+    if left >= 4 {
+        0b1111
+    } else {
+        (1u32 << left) - 1
+    }
+}
+
+/// The single-ray kernel's state between runs of its hot loop ([`Tracer::walk`]).
+struct Walk<'a> {
+    /// The traversal stack (entries `..sp`); what does not fit is spilled by the driver.
+    fixed: &'a mut [Entry; STACK],
+    sp: usize,
+    /// The entry to visit before popping (the one an [`Event`] interrupted).
+    next: Option<Entry>,
+    /// The node array open.
+    c: Cursor,
+    /// The distance of the closest hit so far (the ray's end when none).
+    t_best: f32,
+    best: Option<Hit>,
+}
+
+/// Why the hot loop returned to the driver.
+#[derive(Clone, Copy, Debug)]
+enum Event {
+    /// The stack is empty (the driver refills it from its spill, or the ray is done).
+    Empty,
+    /// An any-hit query found a hit.
+    Hit,
+    /// [`Walk::next`] needs node array `arr` opened (through [`Tracer::enter`]).
+    Enter(u32),
+    /// An edge exactly on the ray in block `first` of a leaf, `count` triangles from there to
+    /// its end, left to the double-precision reference.
+    Exact { first: u32, count: u32 },
+    /// The fixed stack has no room for a node's children.
+    Full,
+}
+
+impl Cursor {
+    /// The hit record of `h` in `lane` of block `blk` (`b`) of the open tile.
+    #[inline(always)]
+    fn hit(&self, h: TriHit, blk: u32, lane: usize, b: &Block) -> Hit {
+        Hit {
+            t: h.t,
+            u: h.u,
+            v: h.v,
+            part: self.part,
+            prim: self.first_slot + 4 * blk + lane as u32,
+            tri: corners(b, lane),
         }
-        Traced::Done(best)
     }
 }
 
