@@ -15,6 +15,21 @@ use crate::writer::{decode_materials, MaterialDesc};
 
 const TILE_UNCHECKED: u8 = 0;
 const TILE_OK: u8 = 1;
+
+/// Which tiles have been checked and found sound ([`Scene::checked_tiles`]): a tile once
+/// checked stays so, so a `true` never goes stale.
+#[derive(Clone, Copy)]
+pub struct CheckedTiles<'a>(&'a [AtomicU8]);
+
+impl CheckedTiles<'_> {
+    /// Whether tile `t` has been checked and found sound. Relaxed: the check publishes
+    /// nothing but its verdict (the tile's bytes are the file's, never written), and a
+    /// relaxed load lets the tracer's loop keep its other loads out of the loop.
+    #[inline(always)]
+    pub fn get(&self, t: u32) -> bool {
+        self.0.get(t as usize).is_some_and(|s| s.load(Ordering::Relaxed) == TILE_OK)
+    }
+}
 const TILE_CORRUPT: u8 = 2;
 
 /// An open, checked, memory-mapped scene file.
@@ -258,7 +273,14 @@ impl Scene {
     /// of [`Scene::tile_usable`]).
     #[inline(always)]
     pub fn tile_checked(&self, t: u32) -> bool {
-        self.tile_state.get(t as usize).is_some_and(|s| s.load(Ordering::Acquire) == TILE_OK)
+        self.checked_tiles().get(t)
+    }
+
+    /// [`Scene::tile_checked`] for all tiles, as a view that a caller keeps (the tracer holds
+    /// one, so that its hot loop reads the states without going through the scene).
+    #[inline(always)]
+    pub fn checked_tiles(&self) -> CheckedTiles<'_> {
+        CheckedTiles(&self.tile_state)
     }
 
     /// Whether tile `t` may be used: checked now if it never was (then `true` from then on),
