@@ -339,19 +339,19 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
             {
                 // Triangle by triangle, against all rays; hits update each ray's closest.
                 let pt = coherent.as_ref().and_then(|c| c.as_ref()).expect("checked");
+                let (part, first_slot) = tracer.slots(&c);
                 for i in 0..count {
                     let (blk, lane) = (first + i / 4, (i % 4) as usize);
                     let b = tracer.block(&c, blk);
                     crate::stats::count(|s| s.blocks += (lane == 0) as u64);
                     let h = pt.test(b, lane, &p.t_max);
-                    let prim = c.first_slot + 4 * blk + lane as u32;
+                    let prim = first_slot + 4 * blk + lane as u32;
                     let mut m = h.ok & live & !h.exact;
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
                         p.t_max[r] = h.t[r];
-                        hits[r] =
-                            Some(Hit { t: h.t[r], u: h.u[r], v: h.v[r], part: c.part, prim, tri: corners(b, lane) });
+                        hits[r] = Some(Hit { t: h.t[r], u: h.u[r], v: h.v[r], part, prim, tri: corners(b, lane) });
                     }
                     // An edge exactly on the ray: the reference's double-precision path.
                     let mut m = h.exact & live;
@@ -360,7 +360,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
                         m &= m - 1;
                         if let Some(t) = WatertightRay::new(&rays[r]).intersect(&corners(b, lane), p.t_max[r]) {
                             p.t_max[r] = t.t;
-                            hits[r] = Some(Hit { t: t.t, u: t.u, v: t.v, part: c.part, prim, tri: corners(b, lane) });
+                            hits[r] = Some(Hit { t: t.t, u: t.u, v: t.v, part, prim, tri: corners(b, lane) });
                         }
                     }
                 }
@@ -368,6 +368,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
             }
             Step::Leaf { first, count } => {
                 // Each ray that entered the box tests the triangles.
+                let (part, first_slot) = tracer.slots(&c);
                 let mut m = live;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
@@ -382,8 +383,8 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
                         crate::stats::count(|s| s.blocks += 1);
                         if let Some((lane, h)) = rt.test(b, lanes, p.t_max[r]) {
                             p.t_max[r] = h.t;
-                            let prim = c.first_slot + 4 * blk + lane as u32;
-                            hits[r] = Some(Hit { t: h.t, u: h.u, v: h.v, part: c.part, prim, tri: corners(b, lane) });
+                            let prim = first_slot + 4 * blk + lane as u32;
+                            hits[r] = Some(Hit { t: h.t, u: h.u, v: h.v, part, prim, tri: corners(b, lane) });
                         }
                         left = left.saturating_sub(4);
                         blk += 1;
