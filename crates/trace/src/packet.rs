@@ -13,6 +13,7 @@ use std::sync::OnceLock;
 
 use crate::{corners, fmax, fmin, Block, Entry, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
 use megaray_base::{Ray, WatertightRay};
+use megaray_scene::format::Node8;
 
 /// Rays in a packet.
 pub const WIDTH: usize = 16;
@@ -86,11 +87,139 @@ struct Packet {
     t_max: [f32; WIDTH],
 }
 
+/// Bounds of a packet's rays for a test of a node's eight boxes against all of them at once
+/// (interval arithmetic, as in Wald et al., "Ray tracing deformable scenes using dynamic
+/// bounding volume hierarchies", 2007): which children no ray can enter, before the per-ray
+/// tests. Conservative by construction: every per-ray slab distance is
+/// `fl(fl(plane - o) * inv)`, which is monotone in `o` and in `inv`, so its extremes over
+/// the packet are those of the corners of the bounds of `o` and `inv`, computed with the same
+/// operations; a child that passes a per-ray test passes this one.
+struct Frustum {
+    o_lo: [f32; 3],
+    o_hi: [f32; 3],
+    i_lo: [f32; 3],
+    i_hi: [f32; 3],
+    /// Per axis: 1 when every ray runs forward along it (its near plane is the box's low
+    /// one), -1 when every ray runs backward, 0 when they differ.
+    sign: [i8; 3],
+    /// The smallest `t_min` of the rays.
+    t_min: f32,
+}
+
+impl Frustum {
+    /// The bounds of the rays of `p` (whose unused lanes repeat ray 0). Plain loops over
+    /// the 16 lanes, which the compiler vectorizes.
+    fn new(p: &Packet) -> Frustum {
+        let mut f = Frustum {
+            o_lo: [0.0; 3],
+            o_hi: [0.0; 3],
+            i_lo: [0.0; 3],
+            i_hi: [0.0; 3],
+            sign: [0; 3],
+            t_min: min16(&p.t_min),
+        };
+        let axes = [(&p.ox, &p.ix), (&p.oy, &p.iy), (&p.oz, &p.iz)];
+        for (a, (o, inv)) in axes.into_iter().enumerate() {
+            (f.o_lo[a], f.o_hi[a]) = (min16(o), max16(o));
+            (f.i_lo[a], f.i_hi[a]) = (min16(inv), max16(inv));
+            // Reciprocals are never zero (directions are fixed away from zero first).
+            f.sign[a] = if f.i_lo[a] > 0.0 {
+                1
+            } else if f.i_hi[a] < 0.0 {
+                -1
+            } else {
+                0
+            };
+        }
+        f
+    }
+
+    /// The children of `node` that some ray may enter before `t_max` (the largest of the
+    /// rays' closest distances), as a bit mask: a superset of what the per-ray tests find.
+    /// Eight children at once, in plain loops the compiler vectorizes.
+    #[inline(always)]
+    fn cull(&self, node: &Node8, t_max: f32) -> u32 {
+        let mut tn = [self.t_min; W];
+        let mut tf = [t_max; W];
+        let planes = [(&node.lo_x, &node.hi_x), (&node.lo_y, &node.hi_y), (&node.lo_z, &node.hi_z)];
+        for (a, (lo, hi)) in planes.into_iter().enumerate() {
+            let (olo, ohi, ilo, ihi) = (self.o_lo[a], self.o_hi[a], self.i_lo[a], self.i_hi[a]);
+            // The least and greatest slab distance of a plane over the packet.
+            let range = |q: f32| {
+                let (d0, d1) = (q - ohi, q - olo);
+                let (x0, x1, x2, x3) = (d0 * ilo, d0 * ihi, d1 * ilo, d1 * ihi);
+                (fmin(fmin(x0, x1), fmin(x2, x3)), fmax(fmax(x0, x1), fmax(x2, x3)))
+            };
+            match self.sign[a] {
+                // One direction for all: the near plane is known (for a box, whose low
+                // plane is not above its high one, the per-ray `min` picks it).
+                1 => {
+                    for k in 0..W {
+                        tn[k] = fmax(tn[k], range(lo[k]).0);
+                        tf[k] = fmin(tf[k], range(hi[k]).1);
+                    }
+                }
+                -1 => {
+                    for k in 0..W {
+                        tn[k] = fmax(tn[k], range(hi[k]).0);
+                        tf[k] = fmin(tf[k], range(lo[k]).1);
+                    }
+                }
+                _ => {
+                    for k in 0..W {
+                        let (a0, a1) = range(lo[k]);
+                        let (b0, b1) = range(hi[k]);
+                        tn[k] = fmax(tn[k], fmin(a0, b0));
+                        tf[k] = fmin(tf[k], fmax(a1, b1));
+                    }
+                }
+            }
+        }
+        let mut m = 0;
+        for h in 0..W / 4 {
+            let n = glam::Vec4::from_slice(&tn[4 * h..4 * h + 4]);
+            let f = glam::Vec4::from_slice(&tf[4 * h..4 * h + 4]) * BOX_EPS;
+            m |= n.cmple(f).bitmask() << (4 * h);
+        }
+        m
+    }
+}
+
+/// The least of 16 values, by halving (vector `min`s).
+#[inline(always)]
+fn min16(v: &[f32; WIDTH]) -> f32 {
+    let mut m = *v;
+    let mut w = WIDTH / 2;
+    while w > 0 {
+        for i in 0..w {
+            m[i] = fmin(m[i], m[i + w]);
+        }
+        w /= 2;
+    }
+    m[0]
+}
+
+/// The greatest of 16 values, by halving.
+#[inline(always)]
+fn max16(v: &[f32; WIDTH]) -> f32 {
+    let mut m = *v;
+    let mut w = WIDTH / 2;
+    while w > 0 {
+        for i in 0..w {
+            m[i] = fmax(m[i], m[i + w]);
+        }
+        w /= 2;
+    }
+    m[0]
+}
+
 /// The watertight test's per-ray constants across a packet (structure of arrays), for
-/// packets whose rays all share the test's axis permutation `k` (coherent rays do): then
-/// one triangle is tested against all 16 rays at once ([`PacketTri::test`]).
+/// packets whose rays all share the test's dominant axis `kz` (coherent rays do): then one
+/// triangle is tested against all 16 rays at once ([`PacketTri::test`]). As in
+/// [`RayTri4`], the other axes are `kz + 1` and `kz + 2` (mod 3) without the reference's
+/// swap, which changes no result.
 struct PacketTri {
-    k: [usize; 3],
+    kz: usize,
     ox: [f32; WIDTH],
     oy: [f32; WIDTH],
     oz: [f32; WIDTH],
@@ -112,12 +241,12 @@ struct Hits16 {
 }
 
 impl PacketTri {
-    /// `None` unless every ray has the same permutation.
+    /// `None` unless every ray has the same dominant axis.
     // Lane loops index several arrays in step (the form that vectorizes).
     #[allow(clippy::needless_range_loop)]
     fn new(rays: &[Ray]) -> Option<PacketTri> {
-        let first = WatertightRay::new(&rays[0]);
-        let [kx, ky, kz] = first.k;
+        let kz = WatertightRay::new(&rays[0]).k[2];
+        let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
         // The rays as structure of arrays (lanes past the packet repeat ray 0).
         let mut d = [[0f32; WIDTH]; 3];
         let mut o = [[0f32; WIDTH]; 3];
@@ -128,9 +257,8 @@ impl PacketTri {
             (o[0][i], o[1][i], o[2][i]) = (r.org.x, r.org.y, r.org.z);
             t_min[i] = r.t_min;
         }
-        // Every lane's permutation must be ray 0's: `WatertightRay::new`'s comparisons,
-        // branch-free, over all lanes at once.
-        let neg0 = d[kz][0] < 0.0;
+        // Every lane's axis must be ray 0's: `WatertightRay::new`'s comparisons, branch-free,
+        // over all lanes at once.
         let mut differ = 0u32;
         for i in 0..WIDTH {
             let (ax, ay, az) = (d[0][i].abs(), d[1][i].abs(), d[2][i].abs());
@@ -145,20 +273,13 @@ impl PacketTri {
             } else {
                 2
             };
-            let dk = if k == 0 {
-                d[0][i]
-            } else if k == 1 {
-                d[1][i]
-            } else {
-                d[2][i]
-            };
-            differ |= ((k != kz) | ((dk < 0.0) != neg0)) as u32;
+            differ |= (k != kz) as u32;
         }
         if differ != 0 {
             return None;
         }
         let mut p = PacketTri {
-            k: first.k,
+            kz,
             ox: o[kx],
             oy: o[ky],
             oz: o[kz],
@@ -176,12 +297,27 @@ impl PacketTri {
         Some(p)
     }
 
+    /// [`PacketTri::test_k`] for this packet's axes.
+    #[inline(always)]
+    fn test(&self, b: &Block, lane: usize, t_max: &[f32; WIDTH]) -> Hits16 {
+        match self.kz {
+            0 => self.test_k::<1, 2, 0>(b, lane, t_max),
+            1 => self.test_k::<2, 0, 1>(b, lane, t_max),
+            _ => self.test_k::<0, 1, 2>(b, lane, t_max),
+        }
+    }
+
     /// Lane `lane` of block `b` against every ray: per ray exactly the operations of
     /// `RayTri4::test` (and so of the scalar reference), in plain loops over the 16 rays
     /// that the compiler vectorizes.
     #[inline(always)]
-    fn test(&self, b: &Block, lane: usize, t_max: &[f32; WIDTH]) -> Hits16 {
-        let [kx, ky, kz] = self.k;
+    fn test_k<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        b: &Block,
+        lane: usize,
+        t_max: &[f32; WIDTH],
+    ) -> Hits16 {
+        let (kx, ky, kz) = (KX, KY, KZ);
         let c = |corner: usize, k: usize| b[3 * corner + k][lane];
         let (a_x, a_y, a_z) = (c(0, kx), c(0, ky), c(0, kz));
         let (b_x, b_y, b_z) = (c(1, kx), c(1, ky), c(1, kz));
@@ -317,11 +453,19 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
         p.t_max[i] = r.t_max;
         hits[i] = None;
     }
+    // Unused lanes repeat ray 0 (they never enter a box: their `t_max` is -inf), so that
+    // the packet's bounds can be taken over all 16 lanes.
+    for i in n..WIDTH {
+        (p.ox[i], p.oy[i], p.oz[i]) = (p.ox[0], p.oy[0], p.oz[0]);
+        (p.ix[i], p.iy[i], p.iz[i]) = (p.ix[0], p.iy[0], p.iz[0]);
+        p.t_min[i] = p.t_min[0];
+    }
     // Coherent packets test each triangle against all their rays at once (the constants
     // are made when the first leaf with several rays is reached).
     let mut coherent: Option<Option<PacketTri>> = None;
     // Entries with the mask of the rays that entered their box and each ray's entry
     // distance (kept per ray, as Embree's hybrid traversal does: no reduction across rays).
+    let frustum = Frustum::new(&p);
     stack.clear();
     stack.push((tracer.root, (1u32 << n) - 1, [f32::NEG_INFINITY; WIDTH]));
     let mut c = tracer.top_cursor();
@@ -400,7 +544,14 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
         // Children hit go straight onto the stack, sorted there far to near (the nearest on
         // top); no staging array to initialise.
         let base = stack.len();
-        for k in 0..W {
+        // The children some ray may enter, by the packet's bounds; only those are tested ray
+        // by ray. (This also culls empty slots, whose inverted box the per-ray form below
+        // would let through, in packets whose rays agree in direction per axis.)
+        let t_hi = max16(&p.t_max);
+        let mut cand = frustum.cull(node, t_hi);
+        while cand != 0 {
+            let k = cand.trailing_zeros() as usize;
+            cand &= cand - 1;
             let (lx, hx) = (node.lo_x[k], node.hi_x[k]);
             let (ly, hy) = (node.lo_y[k], node.hi_y[k]);
             let (lz, hz) = (node.lo_z[k], node.hi_z[k]);
