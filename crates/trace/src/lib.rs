@@ -910,10 +910,10 @@ impl<'s> Tracer<'s> {
     #[inline(always)]
     fn traverse_in<const AVX: bool, const ANY: bool>(&self, ray: &Ray, from: Option<Pending>, pad: usize) -> Traced {
         stats::count(|s| s.rays += 1);
-        FIXED.with(|cell| match cell.try_borrow_mut() {
-            Ok(mut fixed) => self.drive::<AVX, ANY>(ray, from, pad, &mut fixed),
+        SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut scratch) => self.drive::<AVX, ANY>(ray, from, pad, &mut scratch),
             // Taken (never, since traversals do not nest, but a fresh one is as good).
-            Err(_) => self.drive::<AVX, ANY>(ray, from, pad, &mut [Entry::ZERO; STACK]),
+            Err(_) => self.drive::<AVX, ANY>(ray, from, pad, &mut Scratch::fresh()),
         })
     }
 
@@ -923,15 +923,15 @@ impl<'s> Tracer<'s> {
     #[inline(always)]
     fn unpaged<const ANY: bool>(&self, ray: &Ray) -> Option<Found> {
         stats::count(|s| s.rays += 1);
-        FIXED.with(|cell| match cell.try_borrow_mut() {
-            Ok(mut fixed) => self.unpaged_in::<ANY>(ray, &mut fixed),
-            Err(_) => self.unpaged_in::<ANY>(ray, &mut [Entry::ZERO; STACK]),
+        SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut scratch) => self.unpaged_in::<ANY>(ray, &mut scratch),
+            Err(_) => self.unpaged_in::<ANY>(ray, &mut Scratch::fresh()),
         })
     }
 
     #[inline(never)]
-    fn unpaged_in<const ANY: bool>(&self, ray: &Ray, fixed: &mut [Entry; STACK]) -> Option<Found> {
-        let mut w = Walk::new(fixed, self.root, self.top_cursor(), ray.t_max);
+    fn unpaged_in<const ANY: bool>(&self, ray: &Ray, scratch: &mut Scratch) -> Option<Found> {
+        let mut w = Walk::new(scratch, self.root, self.top_cursor(), ray.t_max);
         #[cfg(target_arch = "x86_64")]
         if self.isa != packet::Isa::Baseline {
             return match self.walk_on::<true, ANY>(&mut w, ray) {
@@ -953,9 +953,9 @@ impl<'s> Tracer<'s> {
         ray: &Ray,
         from: Option<Pending>,
         pad: usize,
-        fixed: &mut [Entry; STACK],
+        scratch: &mut Scratch,
     ) -> Traced {
-        let mut w = Walk::new(fixed, self.root, self.top_cursor(), ray.t_max);
+        let mut w = Walk::new(scratch, self.root, self.top_cursor(), ray.t_max);
         if from.is_none() && pad == 0 {
             match self.walk_on::<AVX, ANY>(&mut w, ray) {
                 Event::Empty | Event::Hit => Traced::Done(self.hit_of(w.best)),
@@ -1103,16 +1103,16 @@ impl<'s> Tracer<'s> {
             let kernel = match (self.octant_kernels, w.fresh) {
                 (Some(true), _) => oct,
                 (Some(false), _) => 8,
-                (None, true) => STREAK.with(|s| {
-                    let (last, n) = s.get();
+                (None, true) => {
+                    let (last, n) = *w.streak;
                     let n = if last as usize == oct { n.saturating_add(1) } else { 0 };
-                    s.set((oct as u8, n));
+                    *w.streak = (oct as u8, n);
                     if n >= STREAK_MIN {
                         oct
                     } else {
                         8
                     }
-                }),
+                }
                 // A walk resumed after an event keeps to the generic kernel.
                 (None, false) => 8,
             };
@@ -1364,6 +1364,8 @@ fn lanes(left: u32) -> u32 {
 struct Walk<'a> {
     /// The traversal stack (entries `..sp`); what does not fit is spilled by the driver.
     fixed: &'a mut [Entry; STACK],
+    /// The thread's [`Scratch::streak`].
+    streak: &'a mut (u8, u8),
     sp: usize,
     /// The entry to visit before popping (the one an [`Event`] interrupted).
     next: Option<Entry>,
@@ -1380,8 +1382,9 @@ impl<'a> Walk<'a> {
     /// A new ray's walk from `root` (and so, first, through the scene's box), `c` on the
     /// top-level tree.
     #[inline(always)]
-    fn new(fixed: &'a mut [Entry; STACK], root: Entry, c: Cursor, t_max: f32) -> Walk<'a> {
-        Walk { fixed, sp: 0, next: Some(root), c, t_best: t_max, best: None, fresh: true }
+    fn new(scratch: &'a mut Scratch, root: Entry, c: Cursor, t_max: f32) -> Walk<'a> {
+        let Scratch { stack: fixed, streak } = scratch;
+        Walk { fixed, streak, sp: 0, next: Some(root), c, t_best: t_max, best: None, fresh: true }
     }
 }
 
@@ -1389,10 +1392,6 @@ impl<'a> Walk<'a> {
 /// ([`Tracer::walk_on`]).
 const STREAK_MIN: u8 = 4;
 
-thread_local! {
-    /// This thread's last new ray's octant, and how many before it had the same.
-    static STREAK: std::cell::Cell<(u8, u8)> = const { std::cell::Cell::new((0, 0)) };
-}
 
 /// What a resumed ray had found before it stopped, and its [`Hit`] ([`Pending::hit`]).
 type Prior = (Option<Found>, Option<Hit>);
@@ -1401,10 +1400,27 @@ const NO_PRIOR: Prior = (None, None);
 /// What an unpaged tracer's driver can never end with.
 const UNPAGED: &str = "an unpaged tracer never suspends";
 
+/// A thread's memory for the single-ray kernel, kept from ray to ray (not made and zeroed
+/// for each), in one thread-local ([`SCRATCH`]).
+struct Scratch {
+    /// The traversal stack.
+    stack: [Entry; STACK],
+    /// The octant of the thread's last new ray, and how many before it had the same
+    /// ([`Tracer::walk_on`]).
+    streak: (u8, u8),
+}
+
+impl Scratch {
+    const NEW: Scratch = Scratch { stack: [Entry::ZERO; STACK], streak: (0, 0) };
+
+    /// One for a thread whose own is taken (never: traversals do not nest).
+    fn fresh() -> Scratch {
+        Scratch::NEW
+    }
+}
+
 thread_local! {
-    /// Each thread's stack for the single-ray kernel, kept from ray to ray (not made and
-    /// zeroed for each).
-    static FIXED: RefCell<[Entry; STACK]> = const { RefCell::new([Entry::ZERO; STACK]) };
+    static SCRATCH: RefCell<Scratch> = const { RefCell::new(Scratch::NEW) };
 }
 
 /// Why the hot loop returned to the driver.
