@@ -172,7 +172,7 @@ impl Ctx {
         let (best, nb) = if n >= 1024 {
             (find_split::<32, 2, false>(refs, &ext, n > self.cfg.parallel_above), 32)
         } else if n >= 128 {
-            (find_split::<16, 1, false>(refs, &ext, false), 16)
+            (find_split::<16, 1, true>(refs, &ext, false), 16)
         } else {
             (find_split::<8, 1, true>(refs, &ext, false), 8)
         };
@@ -186,7 +186,12 @@ impl Ctx {
         }
         let (mid, le, re) = if best.0.is_finite() {
             let (axis, s) = (best.1, best.2);
-            partition(refs, |r| bins_of(r, cmin, scale, nb)[axis] < s)
+            // One body per axis, so that the lane it reads is a constant.
+            match axis {
+                0 => partition(refs, |r| bin_on::<0>(r, cmin, scale, nb) < s),
+                1 => partition(refs, |r| bin_on::<1>(r, cmin, scale, nb) < s),
+                _ => partition(refs, |r| bin_on::<2>(r, cmin, scale, nb) < s),
+            }
         } else {
             // All centroids coincide: split the list in two.
             let mid = n / 2;
@@ -213,6 +218,14 @@ fn bins_of(r: &PrimRef, cmin: Vec4, scale: Vec4, nb: usize) -> [usize; 3] {
     const MAGIC: f32 = 8_388_608.0; // 2^23: adding it leaves the integer in the low mantissa bits
     let f = ((r.lo + r.hi - cmin) * scale).clamp(Vec4::ZERO, Vec4::splat(nb as f32 - 1.0)) + Vec4::splat(MAGIC);
     [(f.x.to_bits() & 0xff) as usize, (f.y.to_bits() & 0xff) as usize, (f.z.to_bits() & 0xff) as usize]
+}
+
+/// [`bins_of`] on axis `A` alone (the same operations, so the same bin).
+#[inline(always)]
+fn bin_on<const A: usize>(r: &PrimRef, cmin: Vec4, scale: Vec4, nb: usize) -> usize {
+    const MAGIC: f32 = 8_388_608.0;
+    let f = ((r.lo + r.hi - cmin) * scale).clamp(Vec4::ZERO, Vec4::splat(nb as f32 - 1.0)) + Vec4::splat(MAGIC);
+    (f.to_array()[A].to_bits() & 0xff) as usize
 }
 
 /// Per-axis factors that map a doubled centroid to its bin (0 on flat axes).
@@ -246,11 +259,19 @@ impl<const NB: usize> Bins<NB> {
 
     /// Bins `refs`, alternating between `SETS` bin sets (2 for large nodes, so that neighbours
     /// falling into the same bin do not wait on each other's stores).
-    fn gather<const SETS: usize>(refs: &[PrimRef], cmin: Vec4, scale: Vec4) -> Self {
+    /// With `only` < 3, only that axis's bins are filled (the others stay empty).
+    fn gather<const SETS: usize>(refs: &[PrimRef], cmin: Vec4, scale: Vec4, only: usize) -> Self {
         let mut sets: [Bins<NB>; SETS] = std::array::from_fn(|_| Bins::empty());
         let mut add = |j: usize, r: &PrimRef| {
             let bi = bins_of(r, cmin, scale, NB);
             let b = &mut sets[j];
+            if only < 3 {
+                let (k, i) = (only, bi[only]);
+                b.cnt[k][i] += 1;
+                b.lo[k][i] = b.lo[k][i].min(r.lo);
+                b.hi[k][i] = b.hi[k][i].max(r.hi);
+                return;
+            }
             for (k, &i) in bi.iter().enumerate() {
                 b.cnt[k][i] += 1;
                 b.lo[k][i] = b.lo[k][i].min(r.lo);
@@ -284,16 +305,6 @@ fn find_split<const NB: usize, const SETS: usize, const LONGEST: bool>(
 ) -> (f32, usize, usize) {
     let cmin = ext.clo;
     let scale = bin_scale(ext, NB);
-    let bins = if parallel && refs.len() >= 1 << 17 {
-        use rayon::prelude::*;
-        refs.par_chunks(1 << 15)
-            .map(|c| Bins::<NB>::gather::<SETS>(c, cmin, scale))
-            .reduce(Bins::empty, |a, b| a.merge(&b))
-    } else {
-        Bins::<NB>::gather::<SETS>(refs, cmin, scale)
-    };
-    let (cnt, blo, bhi) = (&bins.cnt, &bins.lo, &bins.hi);
-    let mut best = (f32::INFINITY, 0usize, 0usize);
     let c = ext.chi - ext.clo;
     let longest = if c.x >= c.y && c.x >= c.z {
         0
@@ -302,6 +313,17 @@ fn find_split<const NB: usize, const SETS: usize, const LONGEST: bool>(
     } else {
         2
     };
+    let only = if LONGEST { longest } else { 3 };
+    let bins = if parallel && refs.len() >= 1 << 17 {
+        use rayon::prelude::*;
+        refs.par_chunks(1 << 15)
+            .map(|c| Bins::<NB>::gather::<SETS>(c, cmin, scale, only))
+            .reduce(Bins::empty, |a, b| a.merge(&b))
+    } else {
+        Bins::<NB>::gather::<SETS>(refs, cmin, scale, only)
+    };
+    let (cnt, blo, bhi) = (&bins.cnt, &bins.lo, &bins.hi);
+    let mut best = (f32::INFINITY, 0usize, 0usize);
     for axis in 0..3 {
         if scale[axis] == 0.0 || (LONGEST && axis != longest) {
             continue;
@@ -335,26 +357,29 @@ fn find_split<const NB: usize, const SETS: usize, const LONGEST: bool>(
 
 /// In-place partition; returns the number of elements for which `pred` holds (they come
 /// first) and the extents of both sides. Hoare-style: scan from both ends and swap pairs of
-/// misplaced elements; extents are gathered in a second, branch-free pass over each side.
+/// misplaced elements; every element is added to its side's extent as it is placed, so the
+/// data is read once.
 fn partition(v: &mut [PrimRef], pred: impl Fn(&PrimRef) -> bool) -> (usize, Extent, Extent) {
+    let (mut le, mut re) = (Extent::EMPTY, Extent::EMPTY);
     let (mut i, mut j) = (0, v.len());
     loop {
         while i < j && pred(&v[i]) {
+            le.add(&v[i]);
             i += 1;
         }
         while i < j && !pred(&v[j - 1]) {
+            re.add(&v[j - 1]);
             j -= 1;
         }
         if i >= j {
             break;
         }
         v.swap(i, j - 1);
+        le.add(&v[i]);
+        re.add(&v[j - 1]);
         i += 1;
         j -= 1;
     }
-    let (mut le, mut re) = (Extent::EMPTY, Extent::EMPTY);
-    v[..i].iter().for_each(|r| le.add(r));
-    v[i..].iter().for_each(|r| re.add(r));
     (i, le, re)
 }
 
@@ -377,20 +402,35 @@ fn collapse(root: &BNode, out: &mut Vec<NodeB>, par: u32) -> u32 {
 /// subtrees are collapsed in parallel for `par` more levels.
 fn collapse_inner(node: &BNode, out: &mut Vec<NodeB>, par: u32) -> u32 {
     let BNode::Inner { kids, .. } = node else { unreachable!() };
-    let mut slots: Vec<&BNode> = vec![&kids[0], &kids[1]];
-    while slots.len() < NODE_WIDTH {
-        // Open the inner child with the largest surface area.
-        let pick = slots
-            .iter()
-            .enumerate()
-            .filter(|(_, n)| matches!(n, BNode::Inner { .. }))
-            .max_by(|a, b| a.1.bounds().half_area().total_cmp(&b.1.bounds().half_area()))
-            .map(|(i, _)| i);
-        let Some(i) = pick else { break };
-        let BNode::Inner { kids, .. } = slots[i] else { unreachable!() };
-        slots[i] = &kids[0];
-        slots.insert(i + 1, &kids[1]);
+    // The slots, in order, with the area of each inner one (-1 for leaves: never opened).
+    let mut slot: [&BNode; NODE_WIDTH] = [&kids[0]; NODE_WIDTH];
+    let mut area = [-1f32; NODE_WIDTH];
+    let area_of = |n: &BNode| match n {
+        BNode::Inner { bounds, .. } => bounds.half_area(),
+        BNode::Leaf { .. } => -1.0,
+    };
+    (slot[1], area[0], area[1]) = (&kids[1], area_of(&kids[0]), area_of(&kids[1]));
+    let mut len = 2;
+    while len < NODE_WIDTH {
+        // Open the inner child with the largest surface area (the last of equal ones, as `max_by`).
+        let mut i = usize::MAX;
+        let mut best = -1.0;
+        for (k, &a) in area[..len].iter().enumerate() {
+            if a >= 0.0 && (i == usize::MAX || a >= best) {
+                (i, best) = (k, a);
+            }
+        }
+        if i == usize::MAX {
+            break;
+        }
+        let BNode::Inner { kids, .. } = slot[i] else { unreachable!() };
+        slot.copy_within(i + 1..len, i + 2);
+        area.copy_within(i + 1..len, i + 2);
+        (slot[i], slot[i + 1]) = (&kids[0], &kids[1]);
+        (area[i], area[i + 1]) = (area_of(&kids[0]), area_of(&kids[1]));
+        len += 1;
     }
+    let slots = &slot[..len];
     let me = out.len();
     out.push(NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] });
     let mut depth = 0;

@@ -1392,7 +1392,6 @@ impl<'a> Walk<'a> {
 /// ([`Tracer::walk_on`]).
 const STREAK_MIN: u8 = 4;
 
-
 /// What a resumed ray had found before it stopped, and its [`Hit`] ([`Pending::hit`]).
 type Prior = (Option<Found>, Option<Hit>);
 const NO_PRIOR: Prior = (None, None);
