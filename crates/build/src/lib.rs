@@ -40,8 +40,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use megaray_base::{Aabb, Progress};
-use megaray_scene::format::{ChildRef, Node8, PackedNormals, NODE_WIDTH};
-use megaray_scene::{PartBlob, SceneWriter};
+use megaray_scene::format::{Node8, PackedNormals, NODE_WIDTH};
+use megaray_scene::{BlobRef, PartBlob, SceneWriter};
 
 use crate::bvh::{build_bvh, BvhConfig, Kid};
 use crate::stream::{StreamFile, StreamReader, StreamTri};
@@ -278,13 +278,13 @@ pub fn top_level(boxes: &[Aabb]) -> (Vec<Node8>, u32) {
             for k in 0..NODE_WIDTH {
                 let r = match n.kids[k] {
                     Kid::Empty => continue,
-                    Kid::Inner(c) => ChildRef::inner(c),
+                    Kid::Inner(c) => BlobRef::inner(c),
                     Kid::Leaf { start, count } => {
                         debug_assert_eq!(count, 1);
-                        ChildRef::part(bvh.order[start as usize])
+                        BlobRef::part(bvh.order[start as usize])
                     }
                 };
-                out.set(k, &n.bounds[k], r);
+                out.set(k, &n.bounds[k], r.0);
             }
             out
         })

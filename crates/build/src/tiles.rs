@@ -6,8 +6,8 @@
 //! tiles next-fit, so a tile holds neighbouring geometry. Inside a tile, nodes keep depth-first
 //! order (children after parents); a child in another tile is reached through a link.
 
-use megaray_scene::format::{ChildRef, Node8, Tri4, NODE_BYTES};
-use megaray_scene::TileBlob;
+use megaray_scene::format::{Node8, Tri4, NODE_BYTES};
+use megaray_scene::{BlobRef, TileBlob};
 
 use crate::bvh::{Bvh, Kid};
 
@@ -111,9 +111,9 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
                     Kid::Empty => continue,
                     Kid::Inner(c) => {
                         if tile_of[c as usize] == t as u32 {
-                            ChildRef::inner(local_of[c as usize])
+                            BlobRef::inner(local_of[c as usize])
                         } else {
-                            ChildRef::link(tile_of[c as usize], local_of[c as usize])
+                            BlobRef::link(tile_of[c as usize], local_of[c as usize])
                         }
                     }
                     Kid::Leaf { start, count } => {
@@ -132,10 +132,10 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
                             }
                             blob.blocks.push(b);
                         }
-                        ChildRef::leaf(first, count)
+                        BlobRef::leaf(first, count)
                     }
                 };
-                out.set(k, &nodes[n as usize].bounds[k], r);
+                out.set(k, &nodes[n as usize].bounds[k], r.0);
             }
             blob.nodes.push(out);
         }

@@ -15,6 +15,8 @@ pub enum SceneErrorKind {
     Corrupt,
     /// A tile failed its checksum or holds references out of range.
     CorruptTile(u32),
+    /// A scene beyond what the format can address (writing).
+    TooLarge,
 }
 
 /// A scene file fault: which file, what kind, and a one-line description.

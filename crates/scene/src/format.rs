@@ -10,7 +10,7 @@ use megaray_base::Aabb;
 /// The first eight bytes of every scene file.
 pub const MAGIC: [u8; 8] = *b"MRAYSCN\x1a";
 /// The format version this code writes and reads.
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 /// Page size: tiles and sections start on multiples of it.
 pub const PAGE: u64 = 4096;
 /// Bytes of the header page (the header struct is followed by zeros up to it).
@@ -113,15 +113,16 @@ impl Node8 {
         child: [ChildRef::EMPTY.0; NODE_WIDTH],
     };
 
-    /// Sets slot `i` to `child` with bounds `b`.
-    pub fn set(&mut self, i: usize, b: &Aabb, child: ChildRef) {
+    /// Sets slot `i` to `child` (the bits of a [`ChildRef`], or, in a builder's blob, of a
+    /// [`crate::writer::BlobRef`]) with bounds `b`.
+    pub fn set(&mut self, i: usize, b: &Aabb, child: u64) {
         self.lo_x[i] = b.min[0];
         self.lo_y[i] = b.min[1];
         self.lo_z[i] = b.min[2];
         self.hi_x[i] = b.max[0];
         self.hi_y[i] = b.max[1];
         self.hi_z[i] = b.max[2];
-        self.child[i] = child.0;
+        self.child[i] = child;
     }
 
     /// The node as eight 32-byte rows: rows 0..6 are `lo_x, hi_x, lo_y, hi_y, lo_z, hi_z`
@@ -137,16 +138,20 @@ impl Node8 {
     }
 }
 
-/// A reference from a [`Node8`] slot to a child: one tagged 64-bit integer.
+/// A reference from a [`Node8`] slot to a child: one tagged 64-bit integer. Positions are
+/// absolute, in units of the file (so that a reader that maps the whole file follows a
+/// reference without looking up the tile it lies in): nodes by `offset / 256`, triangle
+/// blocks by `offset / 16`.
 ///
 /// | bits 63..62 | meaning | payload |
 /// |---|---|---|
-/// | `00` | inner node in the same node array | bits 0..32: node index |
-/// | `01` | leaf: triangles of the same tile | bits 0..32: first [`Tri4`] block, bits 32..40: triangle count (1..=255) |
-/// | `10` | link: a node in another tile | bits 0..32: tile index, bits 32..62: node index in that tile |
+/// | `00` | inner node in the same node array | bits 0..36: the node's `offset / 256` |
+/// | `01` | leaf: triangles of the same tile | bits 0..40: its first [`Tri4`]'s `offset / 16`, bits 40..48: triangle count (1..=255) |
+/// | `10` | link: a node in another tile | bits 0..36: the node's `offset / 256`, bits 36..62: tile index |
 /// | `11` | part (top-level tree only): the root of a part | bits 0..32: part index |
 ///
-/// All ones is [`ChildRef::EMPTY`], an unused slot.
+/// All ones is [`ChildRef::EMPTY`], an unused slot. Files are therefore at most 2^44 bytes
+/// (16 TiB) with at most 2^26 tiles.
 #[repr(transparent)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Pod, Zeroable)]
 pub struct ChildRef(pub u64);
@@ -155,26 +160,42 @@ pub struct ChildRef(pub u64);
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Child {
     Empty,
-    Inner(u32),
-    Leaf { first: u32, count: u32 },
-    Link { tile: u32, node: u32 },
+    /// A node, by `offset / 256`.
+    Inner(u64),
+    /// `count` triangles from the block at `offset / 16 == unit`.
+    Leaf {
+        unit: u64,
+        count: u32,
+    },
+    /// A node (by `offset / 256`) of tile `tile`.
+    Link {
+        tile: u32,
+        node: u64,
+    },
     Part(u32),
 }
 
 impl ChildRef {
     pub const EMPTY: ChildRef = ChildRef(u64::MAX);
     const KIND_SHIFT: u32 = 62;
+    /// Largest node position (`offset / 256`) a reference holds.
+    pub const MAX_NODE: u64 = (1 << 36) - 1;
+    /// Largest block position (`offset / 16`) a reference holds.
+    pub const MAX_UNIT: u64 = (1 << 40) - 1;
+    /// Largest tile index a link holds.
+    pub const MAX_TILE: u32 = (1 << 26) - 1;
 
-    pub fn inner(node: u32) -> ChildRef {
-        ChildRef(node as u64)
+    pub fn inner(node: u64) -> ChildRef {
+        debug_assert!(node <= Self::MAX_NODE);
+        ChildRef(node)
     }
-    pub fn leaf(first: u32, count: u32) -> ChildRef {
-        debug_assert!((1..=255).contains(&count));
-        ChildRef((1 << Self::KIND_SHIFT) | ((count as u64) << 32) | first as u64)
+    pub fn leaf(unit: u64, count: u32) -> ChildRef {
+        debug_assert!((1..=255).contains(&count) && unit <= Self::MAX_UNIT);
+        ChildRef((1 << Self::KIND_SHIFT) | ((count as u64) << 40) | unit)
     }
-    pub fn link(tile: u32, node: u32) -> ChildRef {
-        debug_assert!(node < (1 << 30));
-        ChildRef((2 << Self::KIND_SHIFT) | ((node as u64) << 32) | tile as u64)
+    pub fn link(tile: u32, node: u64) -> ChildRef {
+        debug_assert!(node <= Self::MAX_NODE && tile <= Self::MAX_TILE);
+        ChildRef((2 << Self::KIND_SHIFT) | ((tile as u64) << 36) | node)
     }
     pub fn part(part: u32) -> ChildRef {
         ChildRef((3 << Self::KIND_SHIFT) | part as u64)
@@ -185,12 +206,11 @@ impl ChildRef {
         if self.0 == u64::MAX {
             return Child::Empty;
         }
-        let lo = self.0 as u32;
         match self.0 >> Self::KIND_SHIFT {
-            0 => Child::Inner(lo),
-            1 => Child::Leaf { first: lo, count: ((self.0 >> 32) & 0xff) as u32 },
-            2 => Child::Link { tile: lo, node: ((self.0 >> 32) & 0x3fff_ffff) as u32 },
-            _ => Child::Part(lo),
+            0 => Child::Inner(self.0 & Self::MAX_NODE),
+            1 => Child::Leaf { unit: self.0 & Self::MAX_UNIT, count: ((self.0 >> 40) & 0xff) as u32 },
+            2 => Child::Link { tile: ((self.0 >> 36) & Self::MAX_TILE as u64) as u32, node: self.0 & Self::MAX_NODE },
+            _ => Child::Part(self.0 as u32),
         }
     }
 }
@@ -289,6 +309,19 @@ pub struct TileEntry {
 }
 const _: () = assert!(std::mem::size_of::<TileEntry>() == 40);
 
+impl TileEntry {
+    /// The position (`offset / 256`) of the tile's node 0.
+    #[inline(always)]
+    pub fn node0(&self) -> u64 {
+        self.offset / NODE_BYTES as u64
+    }
+    /// The position (`offset / 16`) of the tile's block 0 (right after its nodes).
+    #[inline(always)]
+    pub fn unit0(&self) -> u64 {
+        (self.offset + self.node_count as u64 * NODE_BYTES as u64) / 16
+    }
+}
+
 /// Three vertex normals, each octahedron-encoded into two snorm16 (x in the low half). 12 bytes.
 /// A zero word means "no normal here: use the geometric one".
 #[repr(C)]
@@ -373,15 +406,16 @@ mod tests {
     fn child_refs_round_trip() {
         for c in [
             Child::Inner(0),
-            Child::Inner(u32::MAX),
-            Child::Leaf { first: 123_456, count: 1 },
-            Child::Leaf { first: u32::MAX, count: 255 },
-            Child::Link { tile: 77, node: (1 << 30) - 1 },
+            Child::Inner(ChildRef::MAX_NODE),
+            Child::Leaf { unit: 123_456, count: 1 },
+            Child::Leaf { unit: ChildRef::MAX_UNIT, count: 255 },
+            Child::Link { tile: 77, node: ChildRef::MAX_NODE },
+            Child::Link { tile: ChildRef::MAX_TILE, node: 16 },
             Child::Part(9),
         ] {
             let r = match c {
                 Child::Inner(n) => ChildRef::inner(n),
-                Child::Leaf { first, count } => ChildRef::leaf(first, count),
+                Child::Leaf { unit, count } => ChildRef::leaf(unit, count),
                 Child::Link { tile, node } => ChildRef::link(tile, node),
                 Child::Part(p) => ChildRef::part(p),
                 Child::Empty => ChildRef::EMPTY,

@@ -34,4 +34,4 @@ pub use error::{SceneError, SceneErrorKind};
 pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
 pub use reader::{CheckedTiles, Scene, Tile};
 pub use stats::TreeStats;
-pub use writer::{MaterialDesc, PartBlob, SceneWriter, TileBlob};
+pub use writer::{BlobChild, BlobRef, MaterialDesc, PartBlob, SceneWriter, TileBlob};

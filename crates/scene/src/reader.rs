@@ -47,16 +47,26 @@ pub struct Scene {
 pub struct Tile<'a> {
     pub nodes: &'a [Node8],
     pub blocks: &'a [Tri4],
+    /// The position of node 0 (`offset / 256`) and of block 0 (`offset / 16`), to which
+    /// the nodes' absolute references ([`ChildRef`]) relate.
+    pub node0: u64,
+    pub unit0: u64,
 }
 
 impl Tile<'_> {
+    /// The index in this tile of the block at `unit` (a leaf's [`Child::Leaf::unit`]).
+    pub fn block_index(&self, unit: u64) -> u32 {
+        ((unit - self.unit0) / 9) as u32
+    }
+
     /// Every triangle of the tile, as (slot within the tile, corners), walking its leaves
     /// (padding lanes are not triangles and are skipped).
     pub fn triangles(&self) -> Vec<(u32, [[f32; 3]; 3])> {
         let mut out = Vec::new();
         for n in self.nodes {
             for c in n.child {
-                if let Child::Leaf { first, count } = ChildRef(c).decode() {
+                if let Child::Leaf { unit, count } = ChildRef(c).decode() {
+                    let first = self.block_index(unit);
                     for i in 0..count {
                         let slot = 4 * first + i;
                         out.push((slot, self.blocks[(slot / 4) as usize].tri((slot % 4) as usize)));
@@ -157,11 +167,12 @@ impl Scene {
         let h = &self.header;
         let bad = |what: String| SceneError::corrupt(&self.path, what);
         let len = self.map.len() as u64;
+        let top0 = h.top_nodes_off / NODE_BYTES as u64;
         for (i, n) in self.top_nodes().iter().enumerate() {
             for c in n.child {
                 match ChildRef(c).decode() {
                     Child::Empty => {}
-                    Child::Inner(k) if k < h.top_node_count && k as usize > i => {}
+                    Child::Inner(k) if k > top0 + i as u64 && k < top0 + h.top_node_count as u64 => {}
                     Child::Part(p) if p < h.part_count => {}
                     other => return Err(bad(format!("top-level node {i}: bad child {other:?}"))),
                 }
@@ -405,6 +416,8 @@ impl Scene {
         Tile {
             nodes: bytemuck::cast_slice(&self.map[e.offset as usize..nodes_end]),
             blocks: bytemuck::cast_slice(&self.map[nodes_end..blocks_end]),
+            node0: e.node0(),
+            unit0: e.unit0(),
         }
     }
 
@@ -419,17 +432,24 @@ impl Scene {
             return Err(corrupt("checksum mismatch (the file is damaged)".into()));
         }
         let v = self.tile_unchecked_view(t);
+        let (node0, unit0) = (v.node0, v.unit0);
         for (i, n) in v.nodes.iter().enumerate() {
             for c in n.child {
+                // Absolute positions: inside this tile (inner nodes after the referring one,
+                // leaves on a block boundary with all their blocks), or a node of another
+                // tile of the same part.
                 let ok = match ChildRef(c).decode() {
                     Child::Empty => true,
-                    Child::Inner(k) => (k as usize) < v.nodes.len() && k as usize > i,
-                    Child::Leaf { first, count } => {
-                        count > 0 && first as u64 + (count as u64).div_ceil(4) <= v.blocks.len() as u64
+                    Child::Inner(k) => k > node0 + i as u64 && k < node0 + v.nodes.len() as u64,
+                    Child::Leaf { unit, count } => {
+                        unit >= unit0
+                            && (unit - unit0).is_multiple_of(9)
+                            && count > 0
+                            && (unit - unit0) / 9 + (count as u64).div_ceil(4) <= v.blocks.len() as u64
                     }
-                    Child::Link { tile, node } => {
-                        tiles.get(tile as usize).is_some_and(|o| o.part == e.part && tile != t && node < o.node_count)
-                    }
+                    Child::Link { tile, node } => tiles.get(tile as usize).is_some_and(|o| {
+                        o.part == e.part && tile != t && node >= o.node0() && node < o.node0() + o.node_count as u64
+                    }),
                     Child::Part(_) => false,
                 };
                 if !ok {

@@ -45,13 +45,13 @@ impl Scene {
             let Some(root) = self.tile(p.root_tile) else { continue };
             let root_box = (0..8).fold(Aabb::default(), |b, i| b.union(&root.nodes[p.root_node as usize].bounds(i)));
             let norm = f64::from(root_box.half_area()).max(f64::MIN_POSITIVE);
-            // (tile, node index within the tile)
-            let mut stack = vec![(p.root_tile, p.root_node)];
+            // (tile, node position in the file)
+            let mut stack = vec![(p.root_tile, tiles[p.root_tile as usize].node0() + p.root_node as u64)];
             while let Some((t, k)) = stack.pop() {
                 if !self.tile_usable(t) {
                     continue;
                 }
-                let node = &pool[(tiles[t as usize].offset / crate::format::NODE_BYTES as u64) as usize + k as usize];
+                let node = &pool[k as usize];
                 let mut own = Aabb::default();
                 s.inner_nodes += 1;
                 for i in 0..8 {

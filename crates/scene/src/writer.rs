@@ -9,10 +9,60 @@ use std::path::{Path, PathBuf};
 
 use megaray_base::Aabb;
 
-use crate::error::SceneError;
+use crate::error::{SceneError, SceneErrorKind};
 use crate::format::*;
 
-/// One tile as the builder produces it.
+/// A child reference as a builder writes it into a [`TileBlob`] or the top-level tree,
+/// by positions within what it builds: a node by its index in the tile (or in the top-level
+/// tree), a leaf by its first block's index in the tile, a link by the tile's index in the
+/// part and the node's index in that tile. The writer turns them into the file's absolute
+/// [`ChildRef`]s. Same tags as a [`ChildRef`]; all ones is an empty slot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BlobRef(pub u64);
+
+/// What a [`BlobRef`] points at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlobChild {
+    Empty,
+    Inner(u32),
+    Leaf { first: u32, count: u32 },
+    Link { tile: u32, node: u32 },
+    Part(u32),
+}
+
+impl BlobRef {
+    pub const EMPTY: BlobRef = BlobRef(u64::MAX);
+
+    pub fn inner(node: u32) -> BlobRef {
+        BlobRef(node as u64)
+    }
+    pub fn leaf(first: u32, count: u32) -> BlobRef {
+        debug_assert!((1..=255).contains(&count));
+        BlobRef((1 << 62) | ((count as u64) << 32) | first as u64)
+    }
+    pub fn link(tile: u32, node: u32) -> BlobRef {
+        debug_assert!(node < (1 << 30));
+        BlobRef((2 << 62) | ((node as u64) << 32) | tile as u64)
+    }
+    pub fn part(part: u32) -> BlobRef {
+        BlobRef((3 << 62) | part as u64)
+    }
+
+    pub fn decode(self) -> BlobChild {
+        if self.0 == u64::MAX {
+            return BlobChild::Empty;
+        }
+        let lo = self.0 as u32;
+        match self.0 >> 62 {
+            0 => BlobChild::Inner(lo),
+            1 => BlobChild::Leaf { first: lo, count: ((self.0 >> 32) & 0xff) as u32 },
+            2 => BlobChild::Link { tile: lo, node: ((self.0 >> 32) & 0x3fff_ffff) as u32 },
+            _ => BlobChild::Part(lo),
+        }
+    }
+}
+
+/// One tile as the builder produces it (its nodes' children are [`BlobRef`]s).
 #[derive(Clone, Debug, Default)]
 pub struct TileBlob {
     pub nodes: Vec<Node8>,
@@ -27,8 +77,8 @@ impl TileBlob {
 }
 
 /// One part as the builder produces it. Links in its nodes name tiles by their index
-/// in `tiles` (the writer turns them into file-wide tile numbers). Attribute arrays have
-/// one entry per triangle slot (4 per block).
+/// in `tiles` ([`BlobRef`]; the writer turns them into file-wide tile numbers and absolute
+/// positions). Attribute arrays have one entry per triangle slot (4 per block).
 #[derive(Clone, Debug, Default)]
 pub struct PartBlob {
     pub bounds: Aabb,
@@ -102,6 +152,19 @@ impl SceneWriter {
         let file = File::create(&tmp).map_err(|e| SceneError::io(path, "create", &e))?;
         let top_off = HEADER_PAGE;
         let parts_off = top_off + (top_nodes.len() * NODE_BYTES) as u64;
+        // The top-level tree's references, made absolute: node `i` lies at `top_off + 256 i`.
+        let mut top_nodes = top_nodes;
+        for n in &mut top_nodes {
+            for c in n.child.iter_mut() {
+                *c = match BlobRef(*c).decode() {
+                    BlobChild::Empty => ChildRef::EMPTY,
+                    BlobChild::Inner(k) => ChildRef::inner(top_off / NODE_BYTES as u64 + k as u64),
+                    BlobChild::Part(p) => ChildRef::part(p),
+                    other => panic!("top-level tree: {other:?} is not a top-level child"),
+                }
+                .0;
+            }
+        }
         let cursor = page_up(parts_off + part_count as u64 * 128);
         let mut w = SceneWriter {
             path: path.to_path_buf(),
@@ -146,14 +209,36 @@ impl SceneWriter {
         let start = self.cursor;
         let mut node_count = 0u64;
         let mut buf: Vec<u8> = Vec::new();
+        // Where each tile of the part will lie (each starts on a page), for absolute references.
+        let mut offsets = Vec::with_capacity(part.tiles.len());
+        let mut at = self.cursor;
         for tile in &part.tiles {
+            offsets.push(at);
+            at += page_up(tile.bytes());
+        }
+        if at > (ChildRef::MAX_NODE + 1) * NODE_BYTES as u64
+            || first_tile as u64 + part.tiles.len() as u64 > ChildRef::MAX_TILE as u64 + 1
+        {
+            let msg = "the scene is larger than the format can address (16 TiB of file, 2^26 tiles)";
+            return Err(SceneError::new(&self.path, SceneErrorKind::TooLarge, msg));
+        }
+        for (ti, tile) in part.tiles.iter().enumerate() {
             buf.clear();
+            let node0 = offsets[ti] / NODE_BYTES as u64;
+            let unit0 = (offsets[ti] + (tile.nodes.len() * NODE_BYTES) as u64) / 16;
             for n in &tile.nodes {
                 let mut n = *n;
                 for c in n.child.iter_mut() {
-                    if let Child::Link { tile, node } = ChildRef(*c).decode() {
-                        *c = ChildRef::link(tile + first_tile, node).0;
+                    *c = match BlobRef(*c).decode() {
+                        BlobChild::Empty => ChildRef::EMPTY,
+                        BlobChild::Inner(k) => ChildRef::inner(node0 + k as u64),
+                        BlobChild::Leaf { first, count } => ChildRef::leaf(unit0 + 9 * first as u64, count),
+                        BlobChild::Link { tile, node } => {
+                            ChildRef::link(tile + first_tile, offsets[tile as usize] / NODE_BYTES as u64 + node as u64)
+                        }
+                        BlobChild::Part(_) => panic!("part {index}: a part reference inside a part"),
                     }
+                    .0;
                 }
                 buf.extend_from_slice(bytemuck::bytes_of(&n));
             }

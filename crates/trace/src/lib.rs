@@ -102,15 +102,14 @@ const BOX_EPS: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::
 struct Entry {
     /// A [`ChildRef`]: an inner node or a leaf of node array `arr`, a link, or a part.
     r: u64,
-    /// The node array `r` is relative to: [`TOP`] or a tile.
+    /// The tile `r` lies in ([`TOP`] for the top-level tree): the one the entry was pushed
+    /// from.
     arr: u32,
     /// Entry distance of its box along the ray.
     t: f32,
 }
 
 impl Entry {
-    /// The root of the top-level tree.
-    const ROOT: Entry = Entry { r: 0, arr: TOP, t: f32::NEG_INFINITY };
     /// All zero bits: what unused stack slots hold (cheapest to initialise).
     const ZERO: Entry = Entry { r: 0, arr: 0, t: 0.0 };
 }
@@ -119,8 +118,8 @@ impl Entry {
 enum Step<'a> {
     /// An inner node to test, in node array `arr`.
     Node(&'a Node8, u32),
-    /// A leaf: `count` triangles from block `first` of the open tile.
-    Leaf { first: u32, count: u32 },
+    /// A leaf: `count` triangles from the block at `unit` (`offset / 16`) of the open tile.
+    Leaf { unit: u64, count: u32 },
     /// Nothing to visit (an empty slot, a corrupt tile).
     Skip,
     /// Its tile is not resident (it has been requested).
@@ -497,12 +496,10 @@ pub struct Tracer<'s> {
     // The scene's tables, looked up once rather than at every tile crossing.
     parts: &'s [PartEntry],
     tiles: &'s [TileEntry],
-    /// The file as nodes and as 16-byte units ([`Scene::node_pool`], [`Scene::vec4_pool`]):
-    /// entering a tile sets two base indices into these instead of slicing the map.
+    /// The file as nodes and as 16-byte units ([`Scene::node_pool`], [`Scene::vec4_pool`]),
+    /// which child references index directly (they hold absolute positions).
     nodes: &'s [Node8],
     vec4: &'s [[f32; 4]],
-    /// Index of the top-level tree's first node in `nodes`.
-    top_base: usize,
     /// The instruction set of the single-ray kernel (chosen once, at creation): the AVX2
     /// kernel on AVX2 and AVX-512 machines, the baseline's otherwise.
     isa: packet::Isa,
@@ -549,19 +546,9 @@ pub enum Traced {
     Pending(Pending),
 }
 
-/// Traversal state kept between node visits: the node array currently open.
-#[derive(Clone, Copy)]
-struct Cursor {
-    /// [`TOP`] or a tile.
-    arr: u32,
-    /// Index of the array's node 0 in [`Tracer::nodes`].
-    node_base: usize,
-    /// Index of the tile's block 0 in [`Tracer::vec4`] (9 units per block).
-    block_base: usize,
-}
-
 impl<'s> Tracer<'s> {
     pub fn new(scene: &'s Scene) -> Tracer<'s> {
+        let top0 = scene.header().top_nodes_off / NODE_BYTES as u64;
         Tracer {
             scene,
             pager: None,
@@ -569,14 +556,13 @@ impl<'s> Tracer<'s> {
             tiles: scene.tiles(),
             nodes: scene.node_pool(),
             vec4: scene.vec4_pool(),
-            top_base: scene.header().top_nodes_off as usize / NODE_BYTES,
             isa: packet::Isa::detect(),
             bounds: scene.header().bounds,
             checked: scene.checked_tiles(),
             octant_kernels: None,
             root: match scene.parts().len() {
-                1 => Entry { r: ChildRef::part(0).0, ..Entry::ROOT },
-                _ => Entry::ROOT,
+                1 => Entry { r: ChildRef::part(0).0, arr: TOP, t: f32::NEG_INFINITY },
+                _ => Entry { r: ChildRef::inner(top0).0, arr: TOP, t: f32::NEG_INFINITY },
             },
         }
     }
@@ -613,122 +599,105 @@ impl<'s> Tracer<'s> {
         self.scene
     }
 
-    /// A cursor on the top-level tree.
-    fn top_cursor(&self) -> Cursor {
-        Cursor { arr: TOP, node_base: self.top_base, block_base: 0 }
-    }
-
-    /// Points `c` at node array `arr`; fails with [`Step::Skip`] when that tile is corrupt
-    /// and, on a paged tracer, with [`Step::Missing`] when it is not resident (now requested).
+    /// Makes tile `arr` the open one (`*c`); fails with [`Step::Skip`] when that tile is
+    /// corrupt and, on a paged tracer, with [`Step::Missing`] when it is not resident (now
+    /// requested).
     #[inline(always)]
-    fn open(&self, c: &mut Cursor, arr: u32) -> Result<(), Step<'s>> {
-        if c.arr == arr {
+    fn open(&self, c: &mut u32, arr: u32) -> Result<(), Step<'s>> {
+        if *c == arr {
             return Ok(());
         }
         if self.pager.is_none() && self.checked.get(arr) {
             // The common crossing, inline: an unpaged tile already checked.
-            self.view(c, arr);
+            stats::count(|s| s.tiles_entered += 1);
+            *c = arr;
             return Ok(());
         }
         self.enter(c, arr)
     }
 
-    /// Points `c` at tile `arr`, which exists and is usable.
-    #[inline(always)]
-    fn view(&self, c: &mut Cursor, arr: u32) {
-        stats::count(|s| s.tiles_entered += 1);
-        // A usable tile exists and lies in the file (checked by `Scene::open`), page aligned.
-        let e = &self.tiles[arr as usize];
-        let off = e.offset as usize;
-        *c = Cursor { arr, node_base: off / NODE_BYTES, block_base: (off + e.node_count as usize * NODE_BYTES) / 16 };
-    }
-
-    /// [`Tracer::open`] when `arr` is not the open array.
+    /// [`Tracer::open`] when `arr` is not the open array: the tile is checked (or, paged,
+    /// acquired from the pager).
     #[inline(never)]
-    fn enter(&self, c: &mut Cursor, arr: u32) -> Result<(), Step<'s>> {
-        if arr == TOP {
-            *c = self.top_cursor();
-            return Ok(());
-        }
-        match self.pager {
-            None => {
-                if !self.scene.tile_usable(arr) {
-                    return Err(Step::Skip);
+    fn enter(&self, c: &mut u32, arr: u32) -> Result<(), Step<'s>> {
+        if arr != TOP {
+            match self.pager {
+                None => {
+                    if !self.scene.tile_usable(arr) {
+                        return Err(Step::Skip);
+                    }
                 }
+                Some(p) => match p.acquire(arr) {
+                    Access::Ready => {}
+                    Access::Corrupt => return Err(Step::Skip),
+                    Access::Missing => return Err(Step::Missing(arr)),
+                },
             }
-            Some(p) => match p.acquire(arr) {
-                Access::Ready => {}
-                Access::Corrupt => return Err(Step::Skip),
-                Access::Missing => return Err(Step::Missing(arr)),
-            },
         }
-        self.view(c, arr);
+        stats::count(|s| s.tiles_entered += 1);
+        *c = arr;
         Ok(())
     }
 
-    /// Resolves a popped entry: opens the node array it lives in and says what it is.
+    /// Where a part's traversal starts: its root tile and the root's position.
+    #[inline]
+    fn part_root(&self, p: &PartEntry) -> (u32, u64) {
+        // In range: checked by `Scene::open`.
+        (p.root_tile, self.tiles[p.root_tile as usize].node0() + p.root_node as u64)
+    }
+
+    /// Resolves a popped entry (for the packet kernel): opens the tile it lives in and says
+    /// what it is.
     #[inline(always)]
-    fn step(&self, c: &mut Cursor, e: &Entry) -> Step<'s> {
-        // `ChildRef::decode`, written out: its separate test for an empty slot and the `Child`
-        // enum cost about 1.5% more instructions per ray here (callgrind). An empty slot has kind 3
-        // and is caught with the parts.
+    fn step(&self, c: &mut u32, e: &Entry) -> Step<'s> {
+        // `ChildRef::decode`, written out, its kind's two bits tested one at a time in order
+        // of frequency (as a `match`, the compiler jumps through a table, an indirect branch
+        // that predicts worse). An empty slot has kind 3 and is caught with the parts.
         let r = e.r;
-        let lo = r as u32;
-        // The kind's two bits tested one at a time, in order of frequency: as a `match`, the
-        // compiler jumps through a table, an indirect branch that predicts worse.
         let leaf_or_part = r & (1 << 62) != 0;
         let (arr, node) = if (r as i64) >= 0 {
-            if !leaf_or_part {
-                (e.arr, lo)
-            } else {
-                if let Err(s) = self.open(c, e.arr) {
-                    return s;
-                }
-                return Step::Leaf { first: lo, count: ((r >> 32) & 0xff) as u32 };
+            if let Err(s) = self.open(c, e.arr) {
+                return s;
             }
+            if leaf_or_part {
+                return Step::Leaf { unit: r & ChildRef::MAX_UNIT, count: ((r >> 40) & 0xff) as u32 };
+            }
+            (e.arr, r & ChildRef::MAX_NODE)
         } else if !leaf_or_part {
-            (lo, ((r >> 32) & 0x3fff_ffff) as u32)
+            (((r >> 36) as u32) & ChildRef::MAX_TILE, r & ChildRef::MAX_NODE)
         } else {
-            match self.parts.get(lo as usize) {
+            match self.parts.get(r as u32 as usize) {
                 // Parts only hang off the top-level tree (checked by `Scene::open`); all ones
                 // is an empty slot.
-                Some(p) if r != ChildRef::EMPTY.0 => (p.root_tile, p.root_node),
+                Some(p) if r != ChildRef::EMPTY.0 => self.part_root(p),
                 _ => return Step::Skip,
             }
         };
         if let Err(s) = self.open(c, arr) {
             return s;
         }
-        // In range: node indices were checked with the tile (`Scene::check_tile`).
-        Step::Node(&self.nodes[c.node_base + node as usize], arr)
+        // In range: node positions were checked with the tile (`Scene::check_tile`).
+        Step::Node(&self.nodes[node as usize], arr)
     }
 
-    /// Starts loading the node or triangle block that child reference `r` of a node in the
-    /// open array names (its first 256 bytes: a whole node, or a block and most of the next),
-    /// as Embree's traversal does for the children it hits. Called for the children pushed
-    /// (the nearest is loaded next anyway): they are popped later and find their data in
-    /// cache, so an incoherent ray's misses overlap instead of queueing.
+    /// Starts loading the node or triangle block that child reference `r` names (its first
+    /// 256 bytes: a whole node, or a block and most of the next), as Embree's traversal does
+    /// for the children it hits. Called for the children pushed (the nearest is loaded next
+    /// anyway): they are popped later and find their data in cache, so an incoherent ray's
+    /// misses overlap instead of queueing.
     /// Only the address is computed: a prefetch never faults and needs no bounds (an absent
     /// tile's pages are not touched, so a paged tracer never waits for one).
     #[inline(always)]
-    fn prefetch(&self, c: &Cursor, r: u64) {
+    fn prefetch(&self, r: u64) {
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let lo = r as u32 as usize;
             let base = self.nodes.as_ptr() as *const u8;
-            // The kind's bits tested as in `step` (no jump table).
-            let at = if (r as i64) >= 0 {
-                if r & (1 << 62) == 0 {
-                    (c.node_base + lo) * NODE_BYTES
-                } else {
-                    (c.block_base + 9 * lo) * 16
-                }
-            } else if r & (1 << 62) == 0 {
-                match self.tiles.get(lo) {
-                    Some(t) => t.offset as usize + ((r >> 32) & 0x3fff_ffff) as usize * NODE_BYTES,
-                    None => return,
-                }
+            // Inner nodes and links (bit 62 clear) by node, leaves by block; parts not.
+            let at = if r & (1 << 62) == 0 {
+                (r & ChildRef::MAX_NODE) as usize * NODE_BYTES
+            } else if (r as i64) >= 0 {
+                (r & ChildRef::MAX_UNIT) as usize * 16
             } else {
                 return;
             };
@@ -740,33 +709,37 @@ impl<'s> Tracer<'s> {
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
-        let _ = (c, r);
+        let _ = r;
     }
 
     /// The [`Hit`] of what the single-ray kernel found: its part, slot and corners.
     #[inline]
     fn hit_of(&self, f: Option<Found>) -> Option<Hit> {
         let f = f?;
-        let mut c = self.top_cursor();
-        self.view(&mut c, f.arr);
-        let (part, first_slot) = self.slots(&c);
-        let b = self.block(&c, f.blk);
-        let lane = f.lane as usize;
-        Some(Hit { t: f.t, u: f.u, v: f.v, part, prim: first_slot + 4 * f.blk + f.lane, tri: corners(b, lane) })
+        let (part, prim) = self.slot_of(f.arr, f.unit, f.lane as usize);
+        let tri = corners(self.block_at(f.unit), f.lane as usize);
+        Some(Hit { t: f.t, u: f.u, v: f.v, part, prim, tri })
     }
 
-    /// The part of the open tile and its first triangle slot (the slot of lane `l` of block
-    /// `b` is `first_slot + 4 b + l`).
+    /// The part and triangle slot of lane `lane` of the block at `unit` of tile `arr`
+    /// (lane `l` of the tile's block `b` is slot `first_slot + 4 b + l`).
     #[inline]
-    fn slots(&self, c: &Cursor) -> (u32, u32) {
-        let e = &self.tiles[c.arr as usize];
-        (e.part, e.first_slot)
+    fn slot_of(&self, arr: u32, unit: u64, lane: usize) -> (u32, u32) {
+        let (part, slot0) = self.slots(arr, unit);
+        (part, slot0 + lane as u32)
     }
 
-    /// Block `blk` of the open tile.
+    /// The part of tile `arr` and the slot of lane 0 of its block at `unit`.
+    #[inline]
+    fn slots(&self, arr: u32, unit: u64) -> (u32, u32) {
+        let e = &self.tiles[arr as usize];
+        (e.part, e.first_slot + 4 * ((unit - e.unit0()) / 9) as u32)
+    }
+
+    /// The triangle block at `unit` (`offset / 16`).
     #[inline(always)]
-    fn block(&self, c: &Cursor, blk: u32) -> &'s Block {
-        let s = c.block_base + 9 * blk as usize;
+    fn block_at(&self, unit: u64) -> &'s Block {
+        let s = unit as usize;
         self.vec4[s..s + 9].try_into().expect("nine units")
     }
 
@@ -931,7 +904,7 @@ impl<'s> Tracer<'s> {
 
     #[inline(never)]
     fn unpaged_in<const ANY: bool>(&self, ray: &Ray, scratch: &mut Scratch) -> Option<Found> {
-        let mut w = Walk::new(scratch, self.root, self.top_cursor(), ray.t_max);
+        let mut w = Walk::new(scratch, self.root, ray.t_max);
         #[cfg(target_arch = "x86_64")]
         if self.isa != packet::Isa::Baseline {
             return match self.walk_on::<true, ANY>(&mut w, ray) {
@@ -955,7 +928,7 @@ impl<'s> Tracer<'s> {
         pad: usize,
         scratch: &mut Scratch,
     ) -> Traced {
-        let mut w = Walk::new(scratch, self.root, self.top_cursor(), ray.t_max);
+        let mut w = Walk::new(scratch, self.root, ray.t_max);
         if from.is_none() && pad == 0 {
             match self.walk_on::<AVX, ANY>(&mut w, ray) {
                 Event::Empty | Event::Hit => Traced::Done(self.hit_of(w.best)),
@@ -996,10 +969,10 @@ impl<'s> Tracer<'s> {
     }
 
     /// The public form of the driver's outcome.
-    fn traced(&self, r: Result<Option<Found>, Pending>, prior: Prior) -> Traced {
+    fn traced(&self, r: Result<Option<Found>, Box<Pending>>, prior: Prior) -> Traced {
         match r {
             Ok(f) => Traced::Done(self.hit_after(f, prior)),
-            Err(p) => Traced::Pending(p),
+            Err(p) => Traced::Pending(*p),
         }
     }
 
@@ -1025,7 +998,7 @@ impl<'s> Tracer<'s> {
         mut spill: Vec<Entry>,
         mut first: Option<Event>,
         prior: Prior,
-    ) -> Result<Option<Found>, Pending> {
+    ) -> Result<Option<Found>, Box<Pending>> {
         loop {
             let ev = match first.take() {
                 Some(ev) => ev,
@@ -1057,27 +1030,27 @@ impl<'s> Tracer<'s> {
                         spill.extend_from_slice(&w.fixed[..w.sp]);
                         spill.extend(w.next);
                         let hit = self.hit_after(w.best, prior);
-                        return Err(Pending { stack: spill, best: w.best, hit, any: ANY, tile });
+                        return Err(Box::new(Pending { stack: spill, best: w.best, hit, any: ANY, tile }));
                     }
                     // A corrupt tile: what needed it is skipped.
                     Err(_) => w.next = None,
                 },
-                Event::Exact { first, count } => {
+                Event::Exact { unit, count } => {
                     // The rest of the leaf by the double-precision reference (which gives
                     // the fast test's results wherever that one decides).
                     let rt = RayTri4::new(ray);
-                    let (mut blk, mut left) = (first, count);
+                    let (mut unit, mut left) = (unit, count);
                     while left > 0 {
-                        let b = self.block(&w.c, blk);
+                        let b = self.block_at(unit);
                         if let Some((lane, h)) = rt.scalar(b, lanes(left), w.t_best) {
                             w.t_best = h.t;
-                            w.best = Some(Found::new(h, w.c.arr, blk, lane));
+                            w.best = Some(Found::new(h, w.c, unit, lane));
                             if ANY {
                                 return Ok(w.best);
                             }
                         }
                         left = left.saturating_sub(4);
-                        blk += 1;
+                        unit += 9;
                     }
                 }
             }
@@ -1147,19 +1120,6 @@ impl<'s> Tracer<'s> {
         self.walk::<false, ANY, { usize::MAX }>(w, ray)
     }
 
-    /// The cursor on node array `arr`, which this traversal has entered before (the top-level
-    /// tree, or a tile it reached through a link and so checked): crossing back into it needs
-    /// no check on an unpaged tracer.
-    #[inline(always)]
-    fn reopen(&self, arr: u32) -> Cursor {
-        if arr == TOP {
-            return self.top_cursor();
-        }
-        let mut c = self.top_cursor();
-        self.view(&mut c, arr);
-        c
-    }
-
     /// The hot loop of the single-ray kernel. Near-first: of the children a node's box test
     /// hits, the nearest is visited next, the others are pushed far to near (unsorted for
     /// `ANY`). Leaves are children like any other, so they too are tested nearest first.
@@ -1215,61 +1175,62 @@ impl<'s> Tracer<'s> {
                 // `ChildRef::decode`, written out, its kind's two bits tested one at a time in
                 // order of frequency (as a `match`, the compiler jumps through a table, an
                 // indirect branch that predicts worse). An empty slot is caught with the parts.
+                // References hold absolute positions: no tile needs looking up to follow one.
                 let r = e.r;
-                let lo = r as u32;
                 let leaf_or_part = r & (1 << 62) != 0;
                 let node = if (r as i64) >= 0 {
-                    // An inner node or a leaf of the array the entry was pushed from, which
-                    // this traversal entered before. Unpaged, it is still there and checked:
-                    // reopened at once. Paged, it may have been evicted while the ray was
-                    // pending: the pager is asked again (a ray needs one tile at a time).
-                    if e.arr != c.arr {
+                    // An inner node or a leaf of the tile the entry was pushed from, which
+                    // this traversal entered before. Unpaged, it is still there and checked.
+                    // Paged, it may have been evicted while the ray was pending: the pager is
+                    // asked again (a ray needs one tile at a time).
+                    if e.arr != c {
                         if self.pager.is_none() || e.arr == TOP {
-                            c = self.reopen(e.arr);
+                            c = e.arr;
                         } else {
                             next = Some(e);
                             break 'walk Event::Enter(e.arr);
                         }
                     }
                     if leaf_or_part {
-                        // A leaf: `count` triangles from block `lo` of the open tile.
-                        let (mut blk, mut left) = (lo, ((r >> 32) & 0xff) as u32);
+                        // A leaf: `count` triangles from the block at `unit`.
+                        let (mut unit, mut left) = (r & ChildRef::MAX_UNIT, ((r >> 40) & 0xff) as u32);
                         while left > 0 {
-                            let b = self.block(&c, blk);
+                            let b = self.block_at(unit);
                             stats::count(|s| s.blocks += 1);
                             match rt.try_test(&shared, b, lanes(left), t_best) {
                                 Ok(None) => {}
                                 Ok(Some((lane, h))) => {
                                     t_best = h.t;
-                                    w.best = Some(Found::new(h, c.arr, blk, lane));
+                                    w.best = Some(Found::new(h, c, unit, lane));
                                     if ANY {
                                         break 'walk Event::Hit;
                                     }
                                 }
-                                Err(Exact) => break 'walk Event::Exact { first: blk, count: left },
+                                Err(Exact) => break 'walk Event::Exact { unit, count: left },
                             }
                             left = left.saturating_sub(4);
-                            blk += 1;
+                            unit += 9;
                         }
                         continue 'walk;
                     }
-                    lo
+                    r & ChildRef::MAX_NODE
                 } else {
                     // A link (tile, node), or a part (its root's tile and node), or empty.
                     let (arr, node) = if !leaf_or_part {
-                        (lo, ((r >> 32) & 0x3fff_ffff) as u32)
+                        (((r >> 36) as u32) & ChildRef::MAX_TILE, r & ChildRef::MAX_NODE)
                     } else {
-                        match self.parts.get(lo as usize) {
+                        match self.parts.get(r as u32 as usize) {
                             // Parts only hang off the top-level tree (checked by
                             // `Scene::open`); all ones is an empty slot.
-                            Some(p) if r != ChildRef::EMPTY.0 => (p.root_tile, p.root_node),
+                            Some(p) if r != ChildRef::EMPTY.0 => self.part_root(p),
                             _ => continue 'walk,
                         }
                     };
-                    if arr != c.arr {
+                    if arr != c {
                         if self.pager.is_none() && self.checked.get(arr) {
                             // The common crossing: an unpaged tile already checked.
-                            self.view(&mut c, arr);
+                            stats::count(|s| s.tiles_entered += 1);
+                            c = arr;
                         } else {
                             next = Some(e);
                             break 'walk Event::Enter(arr);
@@ -1282,9 +1243,9 @@ impl<'s> Tracer<'s> {
                     next = Some(e);
                     break 'walk Event::Full;
                 }
-                // In range: node indices were checked with the tile (`Scene::check_tile`).
-                let node = &self.nodes[c.node_base + node as usize];
-                let arr = c.arr;
+                // In range: node positions were checked with the tile (`Scene::check_tile`).
+                let node = &self.nodes[node as usize];
+                let arr = c;
                 stats::count(|s| s.nodes += 1);
                 let (dist, mask) = rb.test::<AVX>(node, t_min, t_best);
                 if mask == 0 {
@@ -1292,7 +1253,7 @@ impl<'s> Tracer<'s> {
                 }
                 let at = |k: u32| Entry { r: node.child[k as usize], arr, t: dist[k as usize] };
                 let mut push = |x: Entry| {
-                    self.prefetch(&c, x.r);
+                    self.prefetch(x.r);
                     w.fixed[sp % STACK] = x;
                     sp += 1;
                 };
@@ -1369,8 +1330,9 @@ struct Walk<'a> {
     sp: usize,
     /// The entry to visit before popping (the one an [`Event`] interrupted).
     next: Option<Entry>,
-    /// The node array open.
-    c: Cursor,
+    /// The tile open (whose tile an inner node or leaf popped is, [`TOP`] for the top-level
+    /// tree): what a hit is credited to, and what a paged walk must ask for again.
+    c: u32,
     /// The distance of the closest hit so far (the ray's end when none).
     t_best: f32,
     best: Option<Found>,
@@ -1379,10 +1341,10 @@ struct Walk<'a> {
 }
 
 impl<'a> Walk<'a> {
-    /// A new ray's walk from `root` (and so, first, through the scene's box), `c` on the
-    /// top-level tree.
+    /// A new ray's walk from `root` (and so, first, through the scene's box).
     #[inline(always)]
-    fn new(scratch: &'a mut Scratch, root: Entry, c: Cursor, t_max: f32) -> Walk<'a> {
+    fn new(scratch: &'a mut Scratch, root: Entry, t_max: f32) -> Walk<'a> {
+        let c = TOP;
         let Scratch { stack: fixed, streak } = scratch;
         Walk { fixed, streak, sp: 0, next: Some(root), c, t_best: t_max, best: None, fresh: true }
     }
@@ -1431,15 +1393,15 @@ enum Event {
     Hit,
     /// [`Walk::next`] needs node array `arr` opened (through [`Tracer::enter`]).
     Enter(u32),
-    /// An edge exactly on the ray in block `first` of a leaf, `count` triangles from there to
-    /// its end, left to the double-precision reference.
-    Exact { first: u32, count: u32 },
+    /// An edge exactly on the ray in the block at `unit` of a leaf, `count` triangles from
+    /// there to its end, left to the double-precision reference.
+    Exact { unit: u64, count: u32 },
     /// The fixed stack has no room for a node's children.
     Full,
 }
 
 /// The closest hit so far of the single-ray kernel, as little as the hot loop needs to
-/// write: which lane of which block of which tile, and the test's results. Made a [`Hit`]
+/// write: which lane of which block (of which tile), and the test's results. Made a [`Hit`]
 /// at the end ([`Tracer::hit_of`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct Found {
@@ -1447,14 +1409,15 @@ struct Found {
     u: f32,
     v: f32,
     arr: u32,
-    blk: u32,
     lane: u32,
+    /// The block's position (`offset / 16`).
+    unit: u64,
 }
 
 impl Found {
     #[inline(always)]
-    fn new(h: TriHit, arr: u32, blk: u32, lane: usize) -> Found {
-        Found { t: h.t, u: h.u, v: h.v, arr, blk, lane: lane as u32 }
+    fn new(h: TriHit, arr: u32, unit: u64, lane: usize) -> Found {
+        Found { t: h.t, u: h.u, v: h.v, arr, lane: lane as u32, unit }
     }
 }
 

@@ -468,7 +468,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
     let frustum = Frustum::new(&p);
     stack.clear();
     stack.push((tracer.root, (1u32 << n) - 1, [f32::NEG_INFINITY; WIDTH]));
-    let mut c = tracer.top_cursor();
+    let mut c = crate::TOP;
     while let Some((e, rays_in, dist)) = stack.pop() {
         // Skip the rays that have found something nearer since, and the entry if all have.
         let t_far = p.t_max.map(|t| t * BOX_EPS);
@@ -478,18 +478,18 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
         }
         let (node, arr) = match tracer.step(&mut c, &e) {
             Step::Node(node, arr) => (node, arr),
-            Step::Leaf { first, count }
+            Step::Leaf { unit, count }
                 if live.count_ones() > 2 && coherent.get_or_insert_with(|| PacketTri::new(rays)).is_some() =>
             {
                 // Triangle by triangle, against all rays; hits update each ray's closest.
                 let pt = coherent.as_ref().and_then(|c| c.as_ref()).expect("checked");
-                let (part, first_slot) = tracer.slots(&c);
+                let (part, slot0) = tracer.slots(c, unit);
                 for i in 0..count {
-                    let (blk, lane) = (first + i / 4, (i % 4) as usize);
-                    let b = tracer.block(&c, blk);
+                    let (blk, lane) = (i / 4, (i % 4) as usize);
+                    let b = tracer.block_at(unit + 9 * blk as u64);
                     crate::stats::count(|s| s.blocks += (lane == 0) as u64);
                     let h = pt.test(b, lane, &p.t_max);
-                    let prim = first_slot + 4 * blk + lane as u32;
+                    let prim = slot0 + 4 * blk + lane as u32;
                     let mut m = h.ok & live & !h.exact;
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
@@ -510,9 +510,9 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
                 }
                 continue;
             }
-            Step::Leaf { first, count } => {
+            Step::Leaf { unit, count } => {
                 // Each ray that entered the box tests the triangles.
-                let (part, first_slot) = tracer.slots(&c);
+                let (part, slot0) = tracer.slots(c, unit);
                 let mut m = live;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
@@ -520,14 +520,14 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
                     // Made per leaf: cheaper than keeping 16 of them (3 KiB to initialise).
                     let rt = RayTri4::new(&rays[r]);
                     let mut left = count;
-                    let mut blk = first;
+                    let mut blk = 0;
                     while left > 0 {
                         let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
-                        let b = tracer.block(&c, blk);
+                        let b = tracer.block_at(unit + 9 * blk as u64);
                         crate::stats::count(|s| s.blocks += 1);
                         if let Some((lane, h)) = rt.test(b, lanes, p.t_max[r]) {
                             p.t_max[r] = h.t;
-                            let prim = first_slot + 4 * blk + lane as u32;
+                            let prim = slot0 + 4 * blk + lane as u32;
                             hits[r] = Some(Hit { t: h.t, u: h.u, v: h.v, part, prim, tri: corners(b, lane) });
                         }
                         left = left.saturating_sub(4);

@@ -1,0 +1,117 @@
+//! The checks of a tile's child references (format v4: absolute positions): a scene written
+//! by `SceneWriter` passes them; each kind of out-of-range reference, patched into a tile
+//! whose checksums are then made right again, is refused with the tile named.
+
+use megaray_base::Aabb;
+use megaray_scene::format::{ChildRef, Header, Node8, TileEntry, Tri4, NODE_BYTES};
+use megaray_scene::{BlobRef, PartBlob, Scene, SceneErrorKind, SceneWriter, TileBlob};
+use std::path::Path;
+
+fn tri(x: f32) -> [[f32; 3]; 3] {
+    [[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 1.0, 0.0]]
+}
+
+fn block(x: f32) -> Tri4 {
+    let mut b = Tri4 { v: [[0.0; 4]; 9] };
+    b.set(0, &tri(x));
+    b
+}
+
+/// One part of two tiles: tile 0 holds the root (a leaf of one triangle and a link to tile
+/// 1) and an inner node below it (a leaf of its own); tile 1 holds one node with a leaf.
+fn write_scene(path: &Path) {
+    let bx = Aabb { min: [0.0, 0.0, 0.0], max: [4.0, 1.0, 0.0] };
+    let mut top = Node8::EMPTY;
+    top.set(0, &bx, BlobRef::part(0).0);
+    let mut w = SceneWriter::create(path, vec![top], 1, 1, 1 << 16).unwrap();
+    let mut root = Node8::EMPTY;
+    root.set(0, &bx, BlobRef::leaf(0, 1).0);
+    root.set(1, &bx, BlobRef::inner(1).0);
+    root.set(2, &bx, BlobRef::link(1, 0).0);
+    let mut below = Node8::EMPTY;
+    below.set(0, &bx, BlobRef::leaf(1, 1).0);
+    let mut other = Node8::EMPTY;
+    other.set(0, &bx, BlobRef::leaf(0, 1).0);
+    let part = PartBlob {
+        bounds: bx,
+        tri_count: 3,
+        depth: 2,
+        tiles: vec![
+            TileBlob { nodes: vec![root, below], blocks: vec![block(0.0), block(1.0)] },
+            TileBlob { nodes: vec![other], blocks: vec![block(2.0)] },
+        ],
+        root_tile: 0,
+        root_node: 0,
+        ..Default::default()
+    };
+    w.append_part(0, part).unwrap();
+    w.finish(bx, 0, &[]).unwrap();
+}
+
+/// Sets child `slot` of node `node` of tile `tile` to `r`, then makes the tile's checksum,
+/// the tables' checksum and the header's right again (so that only the reference is wrong).
+fn patch(path: &Path, tile: usize, node: usize, slot: usize, r: u64) {
+    let mut b = std::fs::read(path).unwrap();
+    let mut h: Header = bytemuck::pod_read_unaligned(&b[..256]);
+    let te = h.tiles_off as usize + 40 * tile;
+    let mut e: TileEntry = bytemuck::pod_read_unaligned(&b[te..te + 40]);
+    let at = e.offset as usize + NODE_BYTES * node + 192 + 8 * slot;
+    b[at..at + 8].copy_from_slice(&r.to_le_bytes());
+    e.checksum = xxhash_rust::xxh3::xxh3_64(&b[e.offset as usize..e.offset as usize + e.bytes as usize]);
+    b[te..te + 40].copy_from_slice(bytemuck::bytes_of(&e));
+    let mut meta = Vec::new();
+    for (off, len) in [
+        (h.top_nodes_off, h.top_node_count as u64 * 256),
+        (h.parts_off, h.part_count as u64 * 128),
+        (h.tiles_off, h.tile_count as u64 * 40),
+        (h.materials_off, h.materials_bytes),
+    ] {
+        meta.extend_from_slice(&b[off as usize..(off + len) as usize]);
+    }
+    h.meta_checksum = xxhash_rust::xxh3::xxh3_64(&meta);
+    b[..256].copy_from_slice(bytemuck::bytes_of(&h));
+    h.header_checksum = xxhash_rust::xxh3::xxh3_64(&b[..248]);
+    b[..256].copy_from_slice(bytemuck::bytes_of(&h));
+    std::fs::write(path, b).unwrap();
+}
+
+#[test]
+fn out_of_range_references_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.mray");
+    write_scene(&good);
+    let scene = Scene::open(&good).unwrap();
+    scene.verify_all().unwrap();
+    let t = scene.tiles();
+    let (node0, unit0) = (t[0].node0(), t[0].unit0());
+    let (node1, tiles) = (t[1].node0(), t.len() as u32);
+    // What the writer made of the blob's references.
+    let n: &Node8 = &scene.node_pool()[node0 as usize];
+    assert_eq!(n.child[0], ChildRef::leaf(unit0, 1).0);
+    assert_eq!(n.child[1], ChildRef::inner(node0 + 1).0);
+    assert_eq!(n.child[2], ChildRef::link(1, node1).0);
+    drop(scene);
+    let bad = [
+        ("inner node pointing back at its own node", ChildRef::inner(node0).0),
+        ("inner node past the tile's nodes", ChildRef::inner(node0 + 2).0),
+        ("inner node in another tile", ChildRef::inner(node1).0),
+        ("leaf off a block boundary", ChildRef::leaf(unit0 + 1, 1).0),
+        ("leaf before the tile's blocks", ChildRef::leaf(unit0 - 9, 1).0),
+        ("leaf longer than the tile's blocks", ChildRef::leaf(unit0 + 9, 5).0),
+        ("link into its own tile", ChildRef::link(0, node0 + 1).0),
+        ("link to no tile", ChildRef::link(tiles, node1).0),
+        ("link past the target tile's nodes", ChildRef::link(1, node1 + 1).0),
+        ("part inside a part", ChildRef::part(0).0),
+    ];
+    for (what, r) in bad {
+        let p = dir.path().join("bad.mray");
+        std::fs::copy(&good, &p).unwrap();
+        patch(&p, 0, 0, 1, r);
+        let scene = Scene::open(&p).unwrap_or_else(|e| panic!("{what}: the tables should still open: {e}"));
+        let e = scene.check_tile(0).expect_err(what);
+        assert_eq!(e.kind, SceneErrorKind::CorruptTile(0), "{what}: {e}");
+        let msg = e.to_string();
+        assert!(msg.contains("bad.mray") && msg.contains("tile 0") && msg.contains("out-of-range"), "{what}: {msg}");
+        assert!(scene.check_tile(1).is_ok(), "{what}: tile 1 is sound");
+    }
+}
