@@ -173,6 +173,13 @@ impl RayBox {
         [32 * near[0], 32 * near[1], 32 * near[2], 32 * (near[0] ^ 1), 32 * (near[1] ^ 1), 32 * (near[2] ^ 1)]
     }
 
+    /// Whether the ray's origin lies in box `b` (then it enters the box, if at all, at once).
+    #[inline(always)]
+    fn starts_inside(&self, b: &megaray_base::Aabb) -> bool {
+        let o = Vec3A::from_array(self.org);
+        (o.cmpge(Vec3A::from_array(b.min)) & o.cmple(Vec3A::from_array(b.max))).all()
+    }
+
     /// Whether the ray enters box `b` within `[t0, t1]`: one box, its three slabs at once,
     /// with the same slab products and widening as the slot tests (and so never stricter than
     /// them; no NaN arises, so `min` and `max` pick the near and far planes alike).
@@ -1144,7 +1151,7 @@ impl<'s> Tracer<'s> {
         let t_min = ray.t_min;
         if w.fresh {
             w.fresh = false;
-            if !rb.enters(&self.bounds, t_min, ray.t_max) {
+            if !rb.starts_inside(&self.bounds) && !rb.enters(&self.bounds, t_min, ray.t_max) {
                 // Most rays of a wide view miss the whole scene: no more set-up for them.
                 return Event::Empty;
             }
@@ -1156,7 +1163,7 @@ impl<'s> Tracer<'s> {
         let mut t_best = w.t_best;
         let mut next = w.next.take();
         let event = 'walk: loop {
-            let mut e = match next.take() {
+            let e = match next.take() {
                 Some(e) => e,
                 None => {
                     if sp == 0 {
@@ -1170,27 +1177,28 @@ impl<'s> Tracer<'s> {
                     e
                 }
             };
-            // Descend from `e`, always into the nearest child hit.
+            // An inner node or a leaf of the tile the entry was pushed from, which this
+            // traversal entered before: unpaged, it is still there and checked. Paged, it may
+            // have been evicted while the ray was pending: the pager is asked again (a ray
+            // needs one tile at a time). (A link or part names its own tile.)
+            if (e.r as i64) >= 0 && e.arr != c {
+                if self.pager.is_none() || e.arr == TOP {
+                    c = e.arr;
+                } else {
+                    next = Some(e);
+                    break 'walk Event::Enter(e.arr);
+                }
+            }
+            // Descend from `e`, always into the nearest child hit (which lies in the open
+            // tile, or names its own).
+            let mut r = e.r;
             loop {
                 // `ChildRef::decode`, written out, its kind's two bits tested one at a time in
                 // order of frequency (as a `match`, the compiler jumps through a table, an
                 // indirect branch that predicts worse). An empty slot is caught with the parts.
                 // References hold absolute positions: no tile needs looking up to follow one.
-                let r = e.r;
                 let leaf_or_part = r & (1 << 62) != 0;
                 let node = if (r as i64) >= 0 {
-                    // An inner node or a leaf of the tile the entry was pushed from, which
-                    // this traversal entered before. Unpaged, it is still there and checked.
-                    // Paged, it may have been evicted while the ray was pending: the pager is
-                    // asked again (a ray needs one tile at a time).
-                    if e.arr != c {
-                        if self.pager.is_none() || e.arr == TOP {
-                            c = e.arr;
-                        } else {
-                            next = Some(e);
-                            break 'walk Event::Enter(e.arr);
-                        }
-                    }
                     if leaf_or_part {
                         // A leaf: `count` triangles from the block at `unit`.
                         let (mut unit, mut left) = (r & ChildRef::MAX_UNIT, ((r >> 40) & 0xff) as u32);
@@ -1232,7 +1240,8 @@ impl<'s> Tracer<'s> {
                             stats::count(|s| s.tiles_entered += 1);
                             c = arr;
                         } else {
-                            next = Some(e);
+                            // (`arr` of a link entry is not read: it names its own tile.)
+                            next = Some(Entry { r, arr: c, t: f32::NEG_INFINITY });
                             break 'walk Event::Enter(arr);
                         }
                     }
@@ -1240,7 +1249,7 @@ impl<'s> Tracer<'s> {
                 };
                 if sp > STACK - W {
                     // No room for seven more entries.
-                    next = Some(e);
+                    next = Some(Entry { r, arr: c, t: f32::NEG_INFINITY });
                     break 'walk Event::Full;
                 }
                 // In range: node positions were checked with the tile (`Scene::check_tile`).
@@ -1260,7 +1269,7 @@ impl<'s> Tracer<'s> {
                 let k0 = mask.trailing_zeros();
                 let m1 = mask & (mask - 1);
                 if m1 == 0 {
-                    e = at(k0);
+                    r = node.child[k0 as usize];
                     continue;
                 }
                 if ANY {
@@ -1271,7 +1280,7 @@ impl<'s> Tracer<'s> {
                         push(at(m.trailing_zeros()));
                         m &= m - 1;
                     }
-                    e = at(k0);
+                    r = node.child[k0 as usize];
                     continue;
                 }
                 let (a, b) = (at(k0), at(m1.trailing_zeros()));
@@ -1279,7 +1288,7 @@ impl<'s> Tracer<'s> {
                 let m2 = m1 & (m1 - 1);
                 if m2 == 0 {
                     push(far);
-                    e = near;
+                    r = near.r;
                     continue;
                 }
                 // Three or more: sort by entry distance (insertion sort, at most eight).
@@ -1300,7 +1309,7 @@ impl<'s> Tracer<'s> {
                 for &x in &order[..n - 1] {
                     push(x);
                 }
-                e = order[n - 1];
+                r = order[n - 1].r;
             }
         };
         w.c = c;
