@@ -22,6 +22,10 @@ const TILE_OK: u8 = 1;
 pub struct CheckedTiles<'a>(&'a [AtomicU8]);
 
 impl CheckedTiles<'_> {
+    /// A view in which no tile counts as checked (for a reader that must ask about every
+    /// tile elsewhere, such as a paged tracer).
+    pub const NONE: CheckedTiles<'static> = CheckedTiles(&[]);
+
     /// Whether tile `t` has been checked and found sound. Relaxed: the check publishes
     /// nothing but its verdict (the tile's bytes are the file's, never written), and a
     /// relaxed load lets the tracer's loop keep its other loads out of the loop.

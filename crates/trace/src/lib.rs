@@ -516,7 +516,8 @@ pub struct Tracer<'s> {
     /// The scene's bounding box: rays that miss it end before any setup.
     bounds: megaray_base::Aabb,
     /// The tiles checked so far (held here so that the hot loop reads it without going
-    /// through the scene).
+    /// through the scene): a link into one of them needs nothing more. A paged tracer holds
+    /// [`CheckedTiles::NONE`], so that it asks the pager at every link instead.
     checked: CheckedTiles<'s>,
     /// Which AVX2 single-ray kernels run: `None` chooses by the rays' coherence
     /// ([`Tracer::walk_on`]), `Some(true)` always the octant ones, `Some(false)` always the
@@ -594,7 +595,7 @@ impl<'s> Tracer<'s> {
     /// A tracer that reads only the tiles `pager` has made resident.
     pub fn paged(pager: &'s Pager) -> Tracer<'s> {
         let scene: &'s Scene = pager.scene();
-        Tracer { pager: Some(pager), ..Tracer::new(scene) }
+        Tracer { pager: Some(pager), checked: CheckedTiles::NONE, ..Tracer::new(scene) }
     }
 
     /// The pager, for a paged tracer.
@@ -614,7 +615,7 @@ impl<'s> Tracer<'s> {
         if *c == arr {
             return Ok(());
         }
-        if self.pager.is_none() && self.checked.get(arr) {
+        if self.checked.get(arr) {
             // The common crossing, inline: an unpaged tile already checked.
             stats::count(|s| s.tiles_entered += 1);
             *c = arr;
@@ -1235,7 +1236,7 @@ impl<'s> Tracer<'s> {
                         }
                     };
                     if arr != c {
-                        if self.pager.is_none() && self.checked.get(arr) {
+                        if self.checked.get(arr) {
                             // The common crossing: an unpaged tile already checked.
                             stats::count(|s| s.tiles_entered += 1);
                             c = arr;
