@@ -147,8 +147,8 @@ impl Node8 {
 /// |---|---|---|
 /// | `00` | inner node in the same node array | bits 0..36: the node's `offset / 256` |
 /// | `01` | leaf: triangles of the same tile | bits 0..40: its first [`Tri4`]'s `offset / 16`, bits 40..48: triangle count (1..=255) |
-/// | `10` | link: a node in another tile | bits 0..36: the node's `offset / 256`, bits 36..62: tile index |
-/// | `11` | part (top-level tree only): the root of a part | bits 0..32: part index |
+/// | `10` | link: a node in another tile (from the top-level tree: a part's root) | bits 0..36: the node's `offset / 256`, bits 36..62: tile index |
+/// | `11` | part: only in a builder's blobs ([`crate::writer::BlobRef`]); the writer makes it a link | bits 0..32: part index |
 ///
 /// All ones is [`ChildRef::EMPTY`], an unused slot. Files are therefore at most 2^44 bytes
 /// (16 TiB) with at most 2^26 tiles.

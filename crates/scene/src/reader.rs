@@ -171,18 +171,26 @@ impl Scene {
         let h = &self.header;
         let bad = |what: String| SceneError::corrupt(&self.path, what);
         let len = self.map.len() as u64;
+        let tiles = self.tiles();
         let top0 = h.top_nodes_off / NODE_BYTES as u64;
         for (i, n) in self.top_nodes().iter().enumerate() {
             for c in n.child {
                 match ChildRef(c).decode() {
                     Child::Empty => {}
                     Child::Inner(k) if k > top0 + i as u64 && k < top0 + h.top_node_count as u64 => {}
-                    Child::Part(p) if p < h.part_count => {}
+                    // A part's root: the root node of the part its tile belongs to.
+                    Child::Link { tile, node }
+                        if tiles.get(tile as usize).is_some_and(|t| {
+                            self.parts().get(t.part as usize).is_some_and(|p| {
+                                p.root_tile == tile
+                                    && p.root_node < t.node_count
+                                    && node == t.node0() + p.root_node as u64
+                            })
+                        }) => {}
                     other => return Err(bad(format!("top-level node {i}: bad child {other:?}"))),
                 }
             }
         }
-        let tiles = self.tiles();
         let mut tri_total = 0u64;
         for (i, p) in self.parts().iter().enumerate() {
             let tiles_end = p.first_tile as u64 + p.tile_count as u64;

@@ -152,17 +152,21 @@ impl SceneWriter {
         let file = File::create(&tmp).map_err(|e| SceneError::io(path, "create", &e))?;
         let top_off = HEADER_PAGE;
         let parts_off = top_off + (top_nodes.len() * NODE_BYTES) as u64;
-        // The top-level tree's references, made absolute: node `i` lies at `top_off + 256 i`.
+        // The top-level tree's inner references, made absolute (node `i` lies at
+        // `top_off + 256 i`); its parts become links to their roots in `finish`, once the
+        // parts are placed.
         let mut top_nodes = top_nodes;
         for n in &mut top_nodes {
             for c in n.child.iter_mut() {
                 *c = match BlobRef(*c).decode() {
-                    BlobChild::Empty => ChildRef::EMPTY,
-                    BlobChild::Inner(k) => ChildRef::inner(top_off / NODE_BYTES as u64 + k as u64),
-                    BlobChild::Part(p) => ChildRef::part(p),
+                    BlobChild::Empty => ChildRef::EMPTY.0,
+                    BlobChild::Inner(k) => ChildRef::inner(top_off / NODE_BYTES as u64 + k as u64).0,
+                    BlobChild::Part(p) => {
+                        assert!(p < part_count, "top-level tree: part {p} of {part_count}");
+                        BlobRef::part(p).0
+                    }
                     other => panic!("top-level tree: {other:?} is not a top-level child"),
-                }
-                .0;
+                };
             }
         }
         let cursor = page_up(parts_off + part_count as u64 * 128);
@@ -331,6 +335,19 @@ impl SceneWriter {
             }
             first_prim += parts[i].tri_count as u64;
         }
+        // The top-level tree's parts, as links to their roots (traversal then never looks a
+        // part up), written over the placeholder `create` wrote.
+        for n in &mut self.top_nodes {
+            for c in n.child.iter_mut() {
+                if let BlobChild::Part(p) = BlobRef(*c).decode() {
+                    let e = &parts[p as usize];
+                    let root = self.tiles[e.root_tile as usize].node0() + e.root_node as u64;
+                    *c = ChildRef::link(e.root_tile, root).0;
+                }
+            }
+        }
+        let top_off = self.top_off;
+        self.write_at(bytemuck::cast_slice(&self.top_nodes.clone()), top_off)?;
         let tiles_off = self.cursor;
         let tiles = std::mem::take(&mut self.tiles);
         self.write_at(bytemuck::cast_slice(&tiles), tiles_off)?;

@@ -48,17 +48,28 @@ fn write_scene(path: &Path) {
     w.finish(bx, 0, &[]).unwrap();
 }
 
-/// Sets child `slot` of node `node` of tile `tile` to `r`, then makes the tile's checksum,
-/// the tables' checksum and the header's right again (so that only the reference is wrong).
-fn patch(path: &Path, tile: usize, node: usize, slot: usize, r: u64) {
+/// Sets child `slot` of node `node` of tile `tile` (`None`: of the top-level tree) to `r`,
+/// then makes the tile's checksum, the tables' checksum and the header's right again (so that
+/// only the reference is wrong).
+fn patch(path: &Path, tile: Option<usize>, node: usize, slot: usize, r: u64) {
     let mut b = std::fs::read(path).unwrap();
     let mut h: Header = bytemuck::pod_read_unaligned(&b[..256]);
-    let te = h.tiles_off as usize + 40 * tile;
-    let mut e: TileEntry = bytemuck::pod_read_unaligned(&b[te..te + 40]);
-    let at = e.offset as usize + NODE_BYTES * node + 192 + 8 * slot;
+    let base = match tile {
+        Some(tile) => {
+            let te = h.tiles_off as usize + 40 * tile;
+            let e: TileEntry = bytemuck::pod_read_unaligned(&b[te..te + 40]);
+            e.offset as usize
+        }
+        None => h.top_nodes_off as usize,
+    };
+    let at = base + NODE_BYTES * node + 192 + 8 * slot;
     b[at..at + 8].copy_from_slice(&r.to_le_bytes());
-    e.checksum = xxhash_rust::xxh3::xxh3_64(&b[e.offset as usize..e.offset as usize + e.bytes as usize]);
-    b[te..te + 40].copy_from_slice(bytemuck::bytes_of(&e));
+    if let Some(tile) = tile {
+        let te = h.tiles_off as usize + 40 * tile;
+        let mut e: TileEntry = bytemuck::pod_read_unaligned(&b[te..te + 40]);
+        e.checksum = xxhash_rust::xxh3::xxh3_64(&b[e.offset as usize..e.offset as usize + e.bytes as usize]);
+        b[te..te + 40].copy_from_slice(bytemuck::bytes_of(&e));
+    }
     let mut meta = Vec::new();
     for (off, len) in [
         (h.top_nodes_off, h.top_node_count as u64 * 256),
@@ -85,7 +96,9 @@ fn out_of_range_references_are_refused() {
     let t = scene.tiles();
     let (node0, unit0) = (t[0].node0(), t[0].unit0());
     let (node1, tiles) = (t[1].node0(), t.len() as u32);
-    // What the writer made of the blob's references.
+    // What the writer made of the blob's references: the top-level tree links to the part's
+    // root; the part's nodes hold absolute positions.
+    assert_eq!(scene.top_nodes()[0].child[0], ChildRef::link(0, node0).0);
     let n: &Node8 = &scene.node_pool()[node0 as usize];
     assert_eq!(n.child[0], ChildRef::leaf(unit0, 1).0);
     assert_eq!(n.child[1], ChildRef::inner(node0 + 1).0);
@@ -106,12 +119,39 @@ fn out_of_range_references_are_refused() {
     for (what, r) in bad {
         let p = dir.path().join("bad.mray");
         std::fs::copy(&good, &p).unwrap();
-        patch(&p, 0, 0, 1, r);
+        patch(&p, Some(0), 0, 1, r);
         let scene = Scene::open(&p).unwrap_or_else(|e| panic!("{what}: the tables should still open: {e}"));
         let e = scene.check_tile(0).expect_err(what);
         assert_eq!(e.kind, SceneErrorKind::CorruptTile(0), "{what}: {e}");
         let msg = e.to_string();
         assert!(msg.contains("bad.mray") && msg.contains("tile 0") && msg.contains("out-of-range"), "{what}: {msg}");
         assert!(scene.check_tile(1).is_ok(), "{what}: tile 1 is sound");
+    }
+}
+
+#[test]
+fn the_top_level_tree_links_only_to_part_roots() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.mray");
+    write_scene(&good);
+    let scene = Scene::open(&good).unwrap();
+    let t = scene.tiles();
+    let (node0, node1, unit0) = (t[0].node0(), t[1].node0(), t[0].unit0());
+    drop(scene);
+    let bad = [
+        ("link to a node that is not the part's root", ChildRef::link(0, node0 + 1).0),
+        ("link into the part's other tile", ChildRef::link(1, node1).0),
+        ("link to no tile", ChildRef::link(7, node0).0),
+        ("leaf", ChildRef::leaf(unit0, 1).0),
+        ("part reference", ChildRef::part(0).0),
+        ("inner node not after the referring one", ChildRef::inner(16).0),
+    ];
+    for (what, r) in bad {
+        let p = dir.path().join("top.mray");
+        std::fs::copy(&good, &p).unwrap();
+        patch(&p, None, 0, 0, r);
+        let e = Scene::open(&p).err().unwrap_or_else(|| panic!("{what}: opened"));
+        let msg = e.to_string();
+        assert!(msg.contains("top.mray") && msg.contains("top-level node 0"), "{what}: {msg}");
     }
 }

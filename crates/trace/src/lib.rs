@@ -27,7 +27,7 @@ use glam::{Vec3A, Vec4};
 use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
 use megaray_page::{Access, Pager};
 use megaray_scene::format::{ChildRef, Node8, NODE_BYTES, NODE_WIDTH};
-use megaray_scene::{CheckedTiles, PartEntry, Scene, TileEntry};
+use megaray_scene::{CheckedTiles, Scene, TileEntry};
 use std::cell::RefCell;
 
 /// A closest hit.
@@ -500,13 +500,12 @@ impl RayTri4 {
 pub struct Tracer<'s> {
     scene: &'s Scene,
     pager: Option<&'s Pager>,
-    // The scene's tables, looked up once rather than at every tile crossing.
-    parts: &'s [PartEntry],
+    /// The tile directory (for hits: a tile's part and first slot).
     tiles: &'s [TileEntry],
-    /// The file as nodes and as 16-byte units ([`Scene::node_pool`], [`Scene::vec4_pool`]),
-    /// which child references index directly (they hold absolute positions).
+    /// The whole file as nodes ([`Scene::node_pool`]; the file is a whole number of
+    /// pages), which child references index directly (they hold absolute positions): inner
+    /// nodes and links by node, triangle blocks by 16-byte unit of the same memory.
     nodes: &'s [Node8],
-    vec4: &'s [[f32; 4]],
     /// The instruction set of the single-ray kernel (chosen once, at creation): the AVX2
     /// kernel on AVX2 and AVX-512 machines, the baseline's otherwise.
     isa: packet::Isa,
@@ -560,16 +559,19 @@ impl<'s> Tracer<'s> {
         Tracer {
             scene,
             pager: None,
-            parts: scene.parts(),
             tiles: scene.tiles(),
             nodes: scene.node_pool(),
-            vec4: scene.vec4_pool(),
             isa: packet::Isa::detect(),
             bounds: scene.header().bounds,
             checked: scene.checked_tiles(),
             octant_kernels: None,
-            root: match scene.parts().len() {
-                1 => Entry { r: ChildRef::part(0).0, arr: TOP, t: f32::NEG_INFINITY },
+            root: match scene.parts() {
+                // The part's root, as the top-level tree links to it (in range: checked by
+                // `Scene::open`).
+                [p] => {
+                    let root = scene.tiles()[p.root_tile as usize].node0() + p.root_node as u64;
+                    Entry { r: ChildRef::link(p.root_tile, root).0, arr: TOP, t: f32::NEG_INFINITY }
+                }
                 _ => Entry { r: ChildRef::inner(top0).0, arr: TOP, t: f32::NEG_INFINITY },
             },
         }
@@ -647,13 +649,6 @@ impl<'s> Tracer<'s> {
         Ok(())
     }
 
-    /// Where a part's traversal starts: its root tile and the root's position.
-    #[inline]
-    fn part_root(&self, p: &PartEntry) -> (u32, u64) {
-        // In range: checked by `Scene::open`.
-        (p.root_tile, self.tiles[p.root_tile as usize].node0() + p.root_node as u64)
-    }
-
     /// Resolves a popped entry (for the packet kernel): opens the tile it lives in and says
     /// what it is.
     #[inline(always)]
@@ -674,12 +669,8 @@ impl<'s> Tracer<'s> {
         } else if !leaf_or_part {
             (((r >> 36) as u32) & ChildRef::MAX_TILE, r & ChildRef::MAX_NODE)
         } else {
-            match self.parts.get(r as u32 as usize) {
-                // Parts only hang off the top-level tree (checked by `Scene::open`); all ones
-                // is an empty slot.
-                Some(p) if r != ChildRef::EMPTY.0 => self.part_root(p),
-                _ => return Step::Skip,
-            }
+            // An empty slot (the top-level tree links to part roots).
+            return Step::Skip;
         };
         if let Err(s) = self.open(c, arr) {
             return s;
@@ -748,7 +739,9 @@ impl<'s> Tracer<'s> {
     #[inline(always)]
     fn block_at(&self, unit: u64) -> &'s Block {
         let s = unit as usize;
-        self.vec4[s..s + 9].try_into().expect("nine units")
+        // The nodes as 16-byte units: the same pointer, 16 times the length (no copy).
+        let units: &'s [[f32; 4]] = bytemuck::cast_slice(self.nodes);
+        units[s..s + 9].try_into().expect("nine units")
     }
 
     /// The closest hit of `ray` in `[ray.t_min, ray.t_max)`. On a paged tracer this waits
@@ -1224,17 +1217,12 @@ impl<'s> Tracer<'s> {
                     }
                     r & ChildRef::MAX_NODE
                 } else {
-                    // A link (tile, node), or a part (its root's tile and node), or empty.
-                    let (arr, node) = if !leaf_or_part {
-                        (((r >> 36) as u32) & ChildRef::MAX_TILE, r & ChildRef::MAX_NODE)
-                    } else {
-                        match self.parts.get(r as u32 as usize) {
-                            // Parts only hang off the top-level tree (checked by
-                            // `Scene::open`); all ones is an empty slot.
-                            Some(p) if r != ChildRef::EMPTY.0 => self.part_root(p),
-                            _ => continue 'walk,
-                        }
-                    };
+                    // A link (tile, node; the top-level tree links to part roots), or an
+                    // empty slot (all ones, the only reference of kind 3 a checked tile has).
+                    if leaf_or_part {
+                        continue 'walk;
+                    }
+                    let (arr, node) = (((r >> 36) as u32) & ChildRef::MAX_TILE, r & ChildRef::MAX_NODE);
                     if arr != c {
                         if self.checked.get(arr) {
                             // The common crossing: an unpaged tile already checked.
