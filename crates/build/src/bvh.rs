@@ -125,19 +125,25 @@ fn half_area(lo: Vec4, hi: Vec4) -> f32 {
 
 /// Builds an 8-wide BVH over primitives with the given boxes (centroids are box centres).
 pub fn build_bvh(boxes: &[Aabb], cfg: BvhConfig) -> Bvh {
-    assert!(!boxes.is_empty(), "build_bvh needs at least one primitive");
+    build_bvh_of(boxes.len(), |i| boxes[i], cfg)
+}
+
+/// [`build_bvh`] over `n` primitives whose boxes `box_of` gives (made as the builder's
+/// references are, so that no array of boxes is needed in between).
+pub fn build_bvh_of(n: usize, box_of: impl Fn(usize) -> Aabb + Sync, cfg: BvhConfig) -> Bvh {
+    assert!(n > 0, "build_bvh needs at least one primitive");
     use rayon::prelude::*;
-    let parallel = boxes.len() > cfg.parallel_above;
-    let make = |(i, b): (usize, &Aabb)| PrimRef {
-        lo: Vec3::from(b.min).extend(0.0),
-        hi: Vec3::from(b.max).extend(f32::from_bits(i as u32)),
+    let parallel = n > cfg.parallel_above;
+    let make = |i: usize| {
+        let b = box_of(i);
+        PrimRef { lo: Vec3::from(b.min).extend(0.0), hi: Vec3::from(b.max).extend(f32::from_bits(i as u32)) }
     };
     let (mut refs, ext): (Vec<PrimRef>, Extent) = if parallel {
-        let refs: Vec<PrimRef> = boxes.par_iter().enumerate().map(make).collect();
+        let refs: Vec<PrimRef> = (0..n).into_par_iter().with_min_len(1 << 14).map(make).collect();
         let ext = refs.par_chunks(1 << 15).map(Extent::of).reduce(|| Extent::EMPTY, Extent::merge);
         (refs, ext)
     } else {
-        let refs: Vec<PrimRef> = boxes.iter().enumerate().map(make).collect();
+        let refs: Vec<PrimRef> = (0..n).map(make).collect();
         let ext = Extent::of(&refs);
         (refs, ext)
     };

@@ -43,7 +43,7 @@ use megaray_base::{Aabb, Progress};
 use megaray_scene::format::{Node8, PackedNormals, NODE_WIDTH};
 use megaray_scene::{BlobRef, PartBlob, SceneWriter};
 
-use crate::bvh::{build_bvh, BvhConfig, Kid};
+use crate::bvh::{build_bvh, build_bvh_of, BvhConfig, Kid};
 use crate::stream::{StreamFile, StreamReader, StreamTri};
 
 /// Estimated peak bytes per triangle of an in-core part build (stream records, boxes, the
@@ -339,15 +339,8 @@ fn build_part(
 /// order (4 per block), the index in `tris` of its triangle or [`tiles::PADDING`]. This is
 /// the in-core builder that `megaray bench` times.
 pub fn build_in_core(tris: &[[[f32; 3]; 3]], tile_target: u32, parallel: bool) -> (PartBlob, Vec<u32>) {
-    let boxes: Vec<Aabb> = if parallel {
-        use rayon::prelude::*;
-        tris.par_iter().with_min_len(1 << 14).map(|t| Aabb::from_points(t)).collect()
-    } else {
-        tris.iter().map(|t| Aabb::from_points(t)).collect()
-    };
     let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX } };
-    let bvh = build_bvh(&boxes, cfg);
-    drop(boxes);
+    let bvh = build_bvh_of(tris.len(), |i| Aabb::from_points(&tris[i]), cfg);
     let tiled = tiles::tile_part(&bvh, tris, tile_target as u64);
     let blob = PartBlob {
         bounds: bvh.bounds,
