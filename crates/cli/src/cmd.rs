@@ -99,7 +99,9 @@ pub fn gen(a: GenArgs, bars: &dyn Progress) -> Result<()> {
 // ---------------------------------------------------------------------------------------
 #[derive(Args)]
 pub struct BuildArgs {
-    /// Model files: .ply, .obj, .stl, .gltf, .glb (merged into one scene).
+    /// Model files: .ply, .obj, .stl, .gltf, .glb (merged into one scene), or gen SPECs
+    /// (e.g. grid:1000; see `megaray gen --help`), generated first into a temporary PLY beside
+    /// the output.
     #[arg(required = true, value_name = "INPUT")]
     inputs: Vec<PathBuf>,
     /// The scene file to write.
@@ -119,6 +121,54 @@ pub struct BuildArgs {
     json: bool,
 }
 
+/// The inputs of a build with each gen SPEC among them (an input that is no file but parses
+/// as a [`GenSpec`]) generated into a temporary PLY beside the output; the PLYs are removed
+/// when this is dropped (after the build, or on its error).
+struct GeneratedInputs {
+    inputs: Vec<PathBuf>,
+    temps: Vec<PathBuf>,
+}
+
+impl GeneratedInputs {
+    fn of(inputs: &[PathBuf], out: &Path, bars: &dyn Progress) -> Result<GeneratedInputs> {
+        let mut g = GeneratedInputs { inputs: Vec::new(), temps: Vec::new() };
+        for input in inputs {
+            const MODELS: [&str; 5] = ["ply", "obj", "stl", "gltf", "glb"];
+            let is_model = input.extension().is_some_and(|e| MODELS.iter().any(|m| e.eq_ignore_ascii_case(m)));
+            let spec = match input.to_str() {
+                Some(text) if !input.exists() && !is_model && text.contains(':') => match text.parse::<GenSpec>() {
+                    Ok(spec) => Some(spec),
+                    Err(e) => bail!("{text}: no such model file, nor a gen spec: {e}"),
+                },
+                _ => None,
+            };
+            let Some(spec) = spec else {
+                g.inputs.push(input.clone());
+                continue;
+            };
+            let name = format!(
+                ".{}.{}.gen.ply",
+                out.file_name().unwrap_or_default().to_string_lossy(),
+                spec.name().replace(':', "-")
+            );
+            let ply = out.with_file_name(name);
+            g.temps.push(ply.clone());
+            megaray_gen::write_ply(&spec, &ply, bars)
+                .with_context(|| format!("{}: cannot generate it", spec.name()))?;
+            g.inputs.push(ply);
+        }
+        Ok(g)
+    }
+}
+
+impl Drop for GeneratedInputs {
+    fn drop(&mut self) {
+        for t in &self.temps {
+            let _ = std::fs::remove_file(t);
+        }
+    }
+}
+
 pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
     if !(4096..=(64 << 20)).contains(&a.tile_size) {
         bail!("--tile-size must be between 4K and 64M");
@@ -131,7 +181,9 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
     };
     let cancel = opts.cancel.clone();
     let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed));
-    let s = build_scene(&a.inputs, &a.out, &opts, bars)?;
+    let generated = GeneratedInputs::of(&a.inputs, &a.out, bars)?;
+    let s = build_scene(&generated.inputs, &a.out, &opts, bars)?;
+    drop(generated);
     bars.finish();
     if a.json {
         println!(
