@@ -1,5 +1,5 @@
-//! The in-core builder: an 8-wide BVH over primitive boxes by binned SAH, each wide node made
-//! from binary splits of its largest child ([`Ctx`]), in a build layout ([`Bvh`]). The same builder makes each part's tree (over
+//! The in-core builder: a binned-SAH binary BVH over primitive boxes, then collapsed into a
+//! 8-wide BVH in a build layout ([`Bvh`]). The same builder makes each part's tree (over
 //! triangles) and the top-level tree (over parts). Layout for the file is [`crate::tiles`]'s job.
 
 use glam::{Vec3, Vec4};
@@ -23,6 +23,19 @@ pub struct BvhConfig {
     pub max_leaf: usize,
     /// Build subtrees of more primitives than this in parallel (rayon); `usize::MAX`: never.
     pub parallel_above: usize,
+}
+
+enum BNode {
+    Leaf { bounds: Aabb, start: u32, count: u32 },
+    Inner { bounds: Aabb, kids: Box<[BNode; 2]> },
+}
+
+impl BNode {
+    fn bounds(&self) -> &Aabb {
+        match self {
+            BNode::Leaf { bounds, .. } | BNode::Inner { bounds, .. } => bounds,
+        }
+    }
 }
 
 /// A child slot of a build-layout 8-wide node.
@@ -135,68 +148,30 @@ pub fn build_bvh_of(n: usize, box_of: impl Fn(usize) -> Aabb + Sync, cfg: BvhCon
         (refs, ext)
     };
     let ctx = Ctx { cfg };
-    let root = ctx.cand(&refs, ext, 0);
-    let bounds = ext.bounds();
-    let mut nodes = Vec::new();
-    let depth = if root.split.is_none() {
-        // A tree that is a single leaf: a root node with one leaf child.
-        let mut n = NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] };
-        n.bounds[0] = bounds;
-        n.kids[0] = Kid::Leaf { start: 0, count: root.end };
-        nodes.push(n);
-        1
-    } else {
-        ctx.node8(root, &mut refs, &mut nodes)
-    };
+    let root = ctx.build(&mut refs, ext, 0);
     let order: Vec<u32> =
         if parallel { refs.par_iter().map(|r| r.id()).collect() } else { refs.iter().map(|r| r.id()).collect() };
+    drop(refs);
+    let bounds = *root.bounds();
+    let mut nodes = Vec::new();
+    // The top two levels of 8-wide nodes collapse their subtrees in parallel (up to 64
+    // tasks); the layout is the same as a serial collapse.
+    let depth = collapse(&root, &mut nodes, if parallel { 2 } else { 0 });
     Bvh { nodes, order, bounds, depth }
-}
-
-/// How an inner candidate's references split (decided when the candidate is made).
-#[derive(Clone, Copy, Debug)]
-enum Split {
-    /// By bin `bin_on(axis) < first` among `nb` bins over its centroids' extent.
-    Bins { axis: usize, first: usize, nb: usize },
-    /// In two halves as they lie (all centroids coincide).
-    Halves,
-}
-
-/// A range of references (`start..end` of the order) and what the SAH made of it: a leaf
-/// (`split` none) or a node to split, maybe already split (`halves`, ahead of the greedy
-/// order, when several large ones are split in parallel).
-struct Cand {
-    start: u32,
-    end: u32,
-    ext: Extent,
-    split: Option<Split>,
-    halves: Option<Box<[Cand; 2]>>,
-}
-
-impl Cand {
-    fn len(&self) -> usize {
-        (self.end - self.start) as usize
-    }
 }
 
 struct Ctx {
     cfg: BvhConfig,
 }
 
-/// The builder: top-down binned SAH, binary splits, each 8-wide node made as they are made
-/// (as Embree builds its wide trees): starting from a node's range, the child of largest
-/// surface area is split until there are eight, then each inner child becomes a node the same
-/// way. The tree is the one that a binary tree collapsed greedily by area would give, without
-/// the binary tree (a node per allocation, a collapse pass chasing them, their freeing).
 impl Ctx {
-    /// What the SAH makes of `refs` (positions `start..` of the order, extent `ext`).
-    fn cand(&self, refs: &[PrimRef], ext: Extent, start: u32) -> Cand {
+    fn build(&self, refs: &mut [PrimRef], ext: Extent, start: u32) -> BNode {
         let n = refs.len();
-        let leaf = Cand { start, end: start + n as u32, ext, split: None, halves: None };
+        let bounds = ext.bounds();
         // One block's worth is always a leaf: splitting it costs a traversal step (C_TRAV)
         // plus at least one block test, against the leaf's one block test.
         if n <= 1 || (n <= self.cfg.max_leaf && n as u32 <= BLOCK) {
-            return leaf;
+            return BNode::Leaf { bounds, start, count: n as u32 };
         }
         // Binned SAH over all three axes in one pass; fewer bins for small nodes, where the
         // per-node cost of clearing and sweeping bins would dominate.
@@ -207,159 +182,38 @@ impl Ctx {
         } else {
             (find_split::<8, 1, true>(refs, &ext, false), 8)
         };
-        let parent_area = ext.bounds().half_area().max(f32::MIN_POSITIVE);
+        let cmin = ext.clo;
+        let scale = bin_scale(&ext, nb);
+        let parent_area = bounds.half_area().max(f32::MIN_POSITIVE);
         let split_cost = C_TRAV + best.0 / parent_area;
         let leaf_cost = blocks(n as u32);
         if n <= self.cfg.max_leaf && (leaf_cost <= split_cost || !best.0.is_finite()) {
-            return leaf;
+            return BNode::Leaf { bounds, start, count: n as u32 };
         }
-        let split = if best.0.is_finite() { Split::Bins { axis: best.1, first: best.2, nb } } else { Split::Halves };
-        Cand { split: Some(split), ..leaf }
-    }
-
-    /// Splits inner candidate `c` (whose references are `refs`): its two halves, each decided.
-    fn open(&self, c: &Cand, refs: &mut [PrimRef]) -> [Cand; 2] {
-        let n = refs.len();
-        let (mid, le, re) = match c.split.expect("only inner candidates are split") {
-            Split::Bins { axis, first, nb } => {
-                let (cmin, scale) = (c.ext.clo, bin_scale(&c.ext, nb));
-                // One body per axis, so that the lane it reads is a constant.
-                match axis {
-                    0 => partition(refs, |r| bin_on::<0>(r, cmin, scale, nb) < first),
-                    1 => partition(refs, |r| bin_on::<1>(r, cmin, scale, nb) < first),
-                    _ => partition(refs, |r| bin_on::<2>(r, cmin, scale, nb) < first),
-                }
+        let (mid, le, re) = if best.0.is_finite() {
+            let (axis, s) = (best.1, best.2);
+            // One body per axis, so that the lane it reads is a constant.
+            match axis {
+                0 => partition(refs, |r| bin_on::<0>(r, cmin, scale, nb) < s),
+                1 => partition(refs, |r| bin_on::<1>(r, cmin, scale, nb) < s),
+                _ => partition(refs, |r| bin_on::<2>(r, cmin, scale, nb) < s),
             }
-            Split::Halves => {
-                let mid = n / 2;
-                (mid, Extent::of(&refs[..mid]), Extent::of(&refs[mid..]))
-            }
+        } else {
+            // All centroids coincide: split the list in two.
+            let mid = n / 2;
+            let (mut le, mut re) = (Extent::EMPTY, Extent::EMPTY);
+            refs[..mid].iter().for_each(|r| le.add(r));
+            refs[mid..].iter().for_each(|r| re.add(r));
+            (mid, le, re)
         };
         let (l, r) = refs.split_at_mut(mid);
-        let m = c.start + mid as u32;
-        let (a, b) = if n > self.cfg.parallel_above {
-            rayon::join(|| self.cand(l, le, c.start), || self.cand(r, re, m))
+        let (ln, rn) = if n > self.cfg.parallel_above {
+            rayon::join(|| self.build(l, le, start), || self.build(r, re, start + mid as u32))
         } else {
-            (self.cand(l, le, c.start), self.cand(r, re, m))
+            (self.build(l, le, start), self.build(r, re, start + mid as u32))
         };
-        [a, b]
+        BNode::Inner { bounds, kids: Box::new([ln, rn]) }
     }
-
-    /// Makes the 8-wide node of inner candidate `c` (whose references are `refs`) and its
-    /// subtree into `out`, the node first (pre-order, children in slot order); returns the
-    /// subtree's depth.
-    fn node8(&self, c: Cand, refs: &mut [PrimRef], out: &mut Vec<NodeB>) -> u32 {
-        let base = c.start;
-        let first = match c.halves {
-            Some(h) => *h,
-            None => self.open(&c, refs),
-        };
-        let mut slots: Vec<Cand> = Vec::with_capacity(NODE_WIDTH);
-        slots.extend(first);
-        while slots.len() < NODE_WIDTH {
-            self.open_ahead(&mut slots, refs);
-            // Split the inner child with the largest surface area (the last of equal ones).
-            let mut pick = None;
-            let mut best = -1.0;
-            for (k, s) in slots.iter().enumerate() {
-                if s.split.is_some() {
-                    let a = s.ext.bounds().half_area();
-                    if pick.is_none() || a >= best {
-                        (pick, best) = (Some(k), a);
-                    }
-                }
-            }
-            let Some(i) = pick else { break };
-            let s = slots.remove(i);
-            let halves = match s.halves {
-                Some(h) => *h,
-                None => self.open(&s, &mut refs[(s.start - base) as usize..(s.end - base) as usize]),
-            };
-            slots.splice(i..i, halves);
-        }
-        let me = out.len();
-        out.push(NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] });
-        let subs = slot_refs(&slots, refs);
-        let mut depth = 0;
-        // Children of many references are made in parallel, each into its own vector,
-        // appended in slot order with its indices shifted: the serial layout. (Not smaller
-        // ones: the copies would cost more than they save.)
-        let big = |s: &Cand| s.split.is_some() && s.len() > self.cfg.parallel_above.saturating_mul(16);
-        if slots.iter().any(big) {
-            use rayon::prelude::*;
-            let kept: Vec<(Aabb, u32, u32, bool)> =
-                slots.iter().map(|s| (s.ext.bounds(), s.start, s.end, s.split.is_some())).collect();
-            let made: Vec<(Vec<NodeB>, u32)> = slots
-                .into_par_iter()
-                .zip(subs)
-                .map(|(s, r)| {
-                    let mut v = Vec::new();
-                    let d = if s.split.is_some() { self.node8(s, r, &mut v) } else { 0 };
-                    (v, d)
-                })
-                .collect();
-            for (k, ((bounds, start, end, inner), (sub, d))) in kept.into_iter().zip(made).enumerate() {
-                out[me].bounds[k] = bounds;
-                out[me].kids[k] = if !inner {
-                    Kid::Leaf { start, count: end - start }
-                } else {
-                    let base = out.len() as u32;
-                    out.extend(sub.into_iter().map(|mut n| {
-                        for kid in &mut n.kids {
-                            if let Kid::Inner(c) = kid {
-                                *c += base;
-                            }
-                        }
-                        n
-                    }));
-                    depth = depth.max(d);
-                    Kid::Inner(base)
-                };
-            }
-            return depth + 1;
-        }
-        for (k, (s, r)) in slots.into_iter().zip(subs).enumerate() {
-            out[me].bounds[k] = s.ext.bounds();
-            out[me].kids[k] = if s.split.is_none() {
-                Kid::Leaf { start: s.start, count: s.end - s.start }
-            } else {
-                let child = out.len() as u32;
-                depth = depth.max(self.node8(s, r, out));
-                Kid::Inner(child)
-            };
-        }
-        depth + 1
-    }
-
-    /// Splits now, in parallel, the inner children of many references not split yet, when
-    /// there are two or more (what splitting them later would give, since their ranges are
-    /// disjoint): the splits near the root then use all threads, as a binary build's would.
-    fn open_ahead(&self, slots: &mut [Cand], refs: &mut [PrimRef]) {
-        let ahead = |s: &Cand| s.split.is_some() && s.halves.is_none() && s.len() > self.cfg.parallel_above;
-        if slots.iter().filter(|s| ahead(s)).count() < 2 {
-            return;
-        }
-        use rayon::prelude::*;
-        let subs = slot_refs(slots, refs);
-        let work: Vec<(&mut Cand, &mut [PrimRef])> = slots.iter_mut().zip(subs).filter(|(s, _)| ahead(s)).collect();
-        work.into_par_iter().for_each(|(s, r)| {
-            let h = self.open(s, r);
-            s.halves = Some(Box::new(h));
-        });
-    }
-}
-
-/// The references of each of `slots` (consecutive ranges that `refs` covers, in order).
-fn slot_refs<'r>(slots: &[Cand], refs: &'r mut [PrimRef]) -> Vec<&'r mut [PrimRef]> {
-    let mut rest = refs;
-    slots
-        .iter()
-        .map(|s| {
-            let (a, b) = std::mem::take(&mut rest).split_at_mut(s.len());
-            rest = b;
-            a
-        })
-        .collect()
 }
 
 /// The bin of `r` on each axis: its doubled centroid mapped through `scale`, clamped to
@@ -535,6 +389,107 @@ fn partition(v: &mut [PrimRef], pred: impl Fn(&PrimRef) -> bool) -> (usize, Exte
     (i, le, re)
 }
 
+/// Collapses the binary tree into 8-wide nodes (pre-order); returns the depth.
+fn collapse(root: &BNode, out: &mut Vec<NodeB>, par: u32) -> u32 {
+    match root {
+        BNode::Leaf { bounds, start, count } => {
+            // A tree that is a single leaf: a root node with one leaf child.
+            let mut n = NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] };
+            n.bounds[0] = *bounds;
+            n.kids[0] = Kid::Leaf { start: *start, count: *count };
+            out.push(n);
+            1
+        }
+        BNode::Inner { .. } => collapse_inner(root, out, par),
+    }
+}
+
+/// Collapses the subtree at binary node `node` into `out` (its root first); its children's
+/// subtrees are collapsed in parallel for `par` more levels.
+fn collapse_inner(node: &BNode, out: &mut Vec<NodeB>, par: u32) -> u32 {
+    let BNode::Inner { kids, .. } = node else { unreachable!() };
+    // The slots, in order, with the area of each inner one (-1 for leaves: never opened).
+    let mut slot: [&BNode; NODE_WIDTH] = [&kids[0]; NODE_WIDTH];
+    let mut area = [-1f32; NODE_WIDTH];
+    let area_of = |n: &BNode| match n {
+        BNode::Inner { bounds, .. } => bounds.half_area(),
+        BNode::Leaf { .. } => -1.0,
+    };
+    (slot[1], area[0], area[1]) = (&kids[1], area_of(&kids[0]), area_of(&kids[1]));
+    let mut len = 2;
+    while len < NODE_WIDTH {
+        // Open the inner child with the largest surface area (the last of equal ones, as `max_by`).
+        let mut i = usize::MAX;
+        let mut best = -1.0;
+        for (k, &a) in area[..len].iter().enumerate() {
+            if a >= 0.0 && (i == usize::MAX || a >= best) {
+                (i, best) = (k, a);
+            }
+        }
+        if i == usize::MAX {
+            break;
+        }
+        let BNode::Inner { kids, .. } = slot[i] else { unreachable!() };
+        slot.copy_within(i + 1..len, i + 2);
+        area.copy_within(i + 1..len, i + 2);
+        (slot[i], slot[i + 1]) = (&kids[0], &kids[1]);
+        (area[i], area[i + 1]) = (area_of(&kids[0]), area_of(&kids[1]));
+        len += 1;
+    }
+    let slots = &slot[..len];
+    let me = out.len();
+    out.push(NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] });
+    let mut depth = 0;
+    if par > 0 {
+        use rayon::prelude::*;
+        // Each inner child's subtree into its own vector (indices relative to its start),
+        // then appended in slot order with its indices shifted: the serial layout.
+        let subs: Vec<(Vec<NodeB>, u32)> = slots
+            .par_iter()
+            .map(|s| match s {
+                BNode::Inner { .. } => {
+                    let mut v = Vec::new();
+                    let d = collapse_inner(s, &mut v, par - 1);
+                    (v, d)
+                }
+                BNode::Leaf { .. } => (Vec::new(), 0),
+            })
+            .collect();
+        for (k, (s, (sub, d))) in slots.iter().zip(subs).enumerate() {
+            out[me].bounds[k] = *s.bounds();
+            out[me].kids[k] = match s {
+                BNode::Leaf { start, count, .. } => Kid::Leaf { start: *start, count: *count },
+                BNode::Inner { .. } => {
+                    let base = out.len() as u32;
+                    out.extend(sub.into_iter().map(|mut n| {
+                        for kid in &mut n.kids {
+                            if let Kid::Inner(c) = kid {
+                                *c += base;
+                            }
+                        }
+                        n
+                    }));
+                    depth = depth.max(d);
+                    Kid::Inner(base)
+                }
+            };
+        }
+        return depth + 1;
+    }
+    for (k, s) in slots.iter().enumerate() {
+        out[me].bounds[k] = *s.bounds();
+        out[me].kids[k] = match s {
+            BNode::Leaf { start, count, .. } => Kid::Leaf { start: *start, count: *count },
+            BNode::Inner { .. } => {
+                let child = out.len() as u32;
+                depth = depth.max(collapse_inner(s, out, 0));
+                Kid::Inner(child)
+            }
+        };
+    }
+    depth + 1
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -568,7 +523,7 @@ mod tests {
         assert!(seen.iter().all(|&c| c == 1));
     }
 
-    /// The parallel build (parallel reference setup, splits ahead and subtrees) lays out exactly
+    /// The parallel build (parallel reference setup, subtrees and collapse) lays out exactly
     /// the tree of the serial one.
     #[test]
     fn parallel_build_equals_serial() {

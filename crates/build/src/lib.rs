@@ -12,7 +12,7 @@
 //!    midpoint when the SAH finds nothing) and route each triangle by its centroid into one of
 //!    up to 256 child files in one pass; children still too large are split again.
 //! 3. **Parts** ([`bvh`], [`tiles`]): each stream small enough is loaded and built in core
-//!    (binned SAH, 8-wide nodes grown by splitting their largest child), cut into page-aligned tiles and appended to the
+//!    (binned SAH, collapsed to an 8-wide BVH), cut into page-aligned tiles and appended to the
 //!    scene file with its attributes. Parts build in parallel, as many at once as threads, each
 //!    sized so that all of them fit `build_mem` together.
 //! 4. **Top level**: a BVH over the parts' boxes, written first in the file.
