@@ -216,22 +216,26 @@ impl Ctx {
     }
 }
 
-/// The bin of `r` on each axis: its doubled centroid mapped through `scale`, clamped to
-/// `0..nb` and rounded to the nearest integer by the 2^23 trick (no float-to-int conversion,
-/// whose saturation checks dominated the builder's profile).
+/// The bin of `r` on each axis, as the low bits of its lanes: its doubled centroid mapped
+/// through `scale`, clamped to `0..nb` and rounded to the nearest integer by the 2^23 trick
+/// (no float-to-int conversion, whose saturation checks dominated the builder's profile).
+#[inline(always)]
+fn bin_lanes(r: &PrimRef, cmin: Vec4, scale: Vec4, nb: usize) -> Vec4 {
+    const MAGIC: f32 = 8_388_608.0; // 2^23: adding it leaves the integer in the low mantissa bits
+    ((r.lo + r.hi - cmin) * scale).clamp(Vec4::ZERO, Vec4::splat(nb as f32 - 1.0)) + Vec4::splat(MAGIC)
+}
+
+/// The bin of `r` on each axis ([`bin_lanes`]).
 #[inline(always)]
 fn bins_of(r: &PrimRef, cmin: Vec4, scale: Vec4, nb: usize) -> [usize; 3] {
-    const MAGIC: f32 = 8_388_608.0; // 2^23: adding it leaves the integer in the low mantissa bits
-    let f = ((r.lo + r.hi - cmin) * scale).clamp(Vec4::ZERO, Vec4::splat(nb as f32 - 1.0)) + Vec4::splat(MAGIC);
+    let f = bin_lanes(r, cmin, scale, nb);
     [(f.x.to_bits() & 0xff) as usize, (f.y.to_bits() & 0xff) as usize, (f.z.to_bits() & 0xff) as usize]
 }
 
 /// [`bins_of`] on axis `A` alone (the same operations, so the same bin).
 #[inline(always)]
 fn bin_on<const A: usize>(r: &PrimRef, cmin: Vec4, scale: Vec4, nb: usize) -> usize {
-    const MAGIC: f32 = 8_388_608.0;
-    let f = ((r.lo + r.hi - cmin) * scale).clamp(Vec4::ZERO, Vec4::splat(nb as f32 - 1.0)) + Vec4::splat(MAGIC);
-    (f.to_array()[A].to_bits() & 0xff) as usize
+    (bin_lanes(r, cmin, scale, nb).to_array()[A].to_bits() & 0xff) as usize
 }
 
 /// Per-axis factors that map a doubled centroid to its bin (0 on flat axes).

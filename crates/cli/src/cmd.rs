@@ -133,8 +133,7 @@ impl GeneratedInputs {
     fn of(inputs: &[PathBuf], out: &Path, bars: &dyn Progress) -> Result<GeneratedInputs> {
         let mut g = GeneratedInputs { inputs: Vec::new(), temps: Vec::new() };
         for input in inputs {
-            const MODELS: [&str; 5] = ["ply", "obj", "stl", "gltf", "glb"];
-            let is_model = input.extension().is_some_and(|e| MODELS.iter().any(|m| e.eq_ignore_ascii_case(m)));
+            let is_model = megaray_import::Format::detect(input).is_ok();
             let spec = match input.to_str() {
                 Some(text) if !input.exists() && !is_model && text.contains(':') => match text.parse::<GenSpec>() {
                     Ok(spec) => Some(spec),

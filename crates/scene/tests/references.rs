@@ -86,6 +86,15 @@ fn patch(path: &Path, tile: Option<usize>, node: usize, slot: usize, r: u64) {
     std::fs::write(path, b).unwrap();
 }
 
+/// A copy of `good` named `name` beside it, with child `slot` of node `node` of `tile`
+/// patched to `r` ([`patch`]).
+fn patched_copy(good: &Path, name: &str, tile: Option<usize>, node: usize, slot: usize, r: u64) -> std::path::PathBuf {
+    let p = good.with_file_name(name);
+    std::fs::copy(good, &p).unwrap();
+    patch(&p, tile, node, slot, r);
+    p
+}
+
 #[test]
 fn out_of_range_references_are_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -117,9 +126,7 @@ fn out_of_range_references_are_refused() {
         ("part inside a part", ChildRef::part(0).0),
     ];
     for (what, r) in bad {
-        let p = dir.path().join("bad.mray");
-        std::fs::copy(&good, &p).unwrap();
-        patch(&p, Some(0), 0, 1, r);
+        let p = patched_copy(&good, "bad.mray", Some(0), 0, 1, r);
         let scene = Scene::open(&p).unwrap_or_else(|e| panic!("{what}: the tables should still open: {e}"));
         let e = scene.check_tile(0).expect_err(what);
         assert_eq!(e.kind, SceneErrorKind::CorruptTile(0), "{what}: {e}");
@@ -147,9 +154,7 @@ fn the_top_level_tree_links_only_to_part_roots() {
         ("inner node not after the referring one", ChildRef::inner(16).0),
     ];
     for (what, r) in bad {
-        let p = dir.path().join("top.mray");
-        std::fs::copy(&good, &p).unwrap();
-        patch(&p, None, 0, 0, r);
+        let p = patched_copy(&good, "top.mray", None, 0, 0, r);
         let e = Scene::open(&p).err().unwrap_or_else(|| panic!("{what}: opened"));
         let msg = e.to_string();
         assert!(msg.contains("top.mray") && msg.contains("top-level node 0"), "{what}: {msg}");

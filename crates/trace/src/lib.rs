@@ -715,20 +715,13 @@ impl<'s> Tracer<'s> {
     #[inline]
     fn hit_of(&self, f: Option<Found>) -> Option<Hit> {
         let f = f?;
-        let (part, prim) = self.slot_of(f.arr, f.unit, f.lane as usize);
+        let (part, slot0) = self.slots(f.arr, f.unit);
         let tri = corners(self.block_at(f.unit), f.lane as usize);
-        Some(Hit { t: f.t, u: f.u, v: f.v, part, prim, tri })
+        Some(Hit { t: f.t, u: f.u, v: f.v, part, prim: slot0 + f.lane, tri })
     }
 
-    /// The part and triangle slot of lane `lane` of the block at `unit` of tile `arr`
-    /// (lane `l` of the tile's block `b` is slot `first_slot + 4 b + l`).
-    #[inline]
-    fn slot_of(&self, arr: u32, unit: u64, lane: usize) -> (u32, u32) {
-        let (part, slot0) = self.slots(arr, unit);
-        (part, slot0 + lane as u32)
-    }
-
-    /// The part of tile `arr` and the slot of lane 0 of its block at `unit`.
+    /// The part of tile `arr` and the slot of lane 0 of its block at `unit` (lane `l` of the
+    /// tile's block `b` is slot `first_slot + 4 b + l`).
     #[inline]
     fn slots(&self, arr: u32, unit: u64) -> (u32, u32) {
         let e = &self.tiles[arr as usize];

@@ -188,25 +188,24 @@ impl Frustum {
 /// The least of 16 values, by halving (vector `min`s).
 #[inline(always)]
 fn min16(v: &[f32; WIDTH]) -> f32 {
-    let mut m = *v;
-    let mut w = WIDTH / 2;
-    while w > 0 {
-        for i in 0..w {
-            m[i] = fmin(m[i], m[i + w]);
-        }
-        w /= 2;
-    }
-    m[0]
+    halve16(v, fmin)
 }
 
 /// The greatest of 16 values, by halving.
 #[inline(always)]
 fn max16(v: &[f32; WIDTH]) -> f32 {
+    halve16(v, fmax)
+}
+
+/// `op` over 16 values by halving: each step folds the upper half onto the lower one (plain
+/// loops the compiler vectorizes).
+#[inline(always)]
+fn halve16(v: &[f32; WIDTH], op: impl Fn(f32, f32) -> f32) -> f32 {
     let mut m = *v;
     let mut w = WIDTH / 2;
     while w > 0 {
         for i in 0..w {
-            m[i] = fmax(m[i], m[i + w]);
+            m[i] = op(m[i], m[i + w]);
         }
         w /= 2;
     }
