@@ -269,13 +269,6 @@ impl Scene {
         bytemuck::cast_slice(&self.map[..self.map.len() / NODE_BYTES * NODE_BYTES])
     }
 
-    /// The whole file as 16-byte units (`[f32; 4]`), in which a [`Tri4`] block at byte `b` (a
-    /// multiple of 16) is the nine units from `b / 16`. The tracer reads blocks through it.
-    #[inline]
-    pub fn vec4_pool(&self) -> &[[f32; 4]] {
-        bytemuck::cast_slice(&self.map[..self.map.len() / 16 * 16])
-    }
-
     pub fn tiles(&self) -> &[TileEntry] {
         let off = self.header.tiles_off as usize;
         bytemuck::cast_slice(&self.map[off..off + self.header.tile_count as usize * 40])

@@ -307,7 +307,8 @@ fn fmax(a: f32, b: f32) -> f32 {
     }
 }
 
-/// A [`Tri4`](megaray_scene::format::Tri4) block as the tracer reads it from [`Scene::vec4_pool`]: its `v`.
+/// A [`Tri4`](megaray_scene::format::Tri4) block as the tracer reads it (its `v`), nine
+/// 16-byte units of the node pool from the block's `offset / 16` ([`Tracer::block_at`]).
 type Block = [[f32; 4]; 9];
 
 /// The corners of the triangle in `lane` of a block (as `Tri4::tri`).
