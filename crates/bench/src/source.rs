@@ -81,6 +81,18 @@ pub struct Loaded {
     tmp: Option<tempfile::TempDir>,
 }
 
+/// `scene` with every tile checked, as the benchmark traces in core (its tracers then take
+/// the kernel that skips tile bookkeeping, [`Scene::all_tiles_checked`]); a corrupt tile is
+/// the scene's error.
+fn in_core(scene: Scene) -> Result<Arc<Scene>, BenchError> {
+    if !scene.check_all_tiles() {
+        if let Some(e) = scene.first_error() {
+            return Err(e.into());
+        }
+    }
+    Ok(Arc::new(scene))
+}
+
 impl Loaded {
     /// Opens `src`: a `.mray` file directly; a model file or gen spec by building it (all
     /// threads, a generous memory budget) into a scene file in a temporary folder of the
@@ -89,7 +101,7 @@ impl Loaded {
         let t0 = Instant::now();
         let (mesh, tmp) = match src {
             Source::Scene(p) => {
-                let scene = Arc::new(Scene::open(p)?);
+                let scene = in_core(Scene::open(p)?)?;
                 let origin = format!("opened {}", p.display());
                 return Ok(Loaded { scene, name: src.name(), origin, mesh: None, tmp: None });
             }
@@ -106,7 +118,7 @@ impl Loaded {
         let opts = BuildOptions { build_mem: BUILD_MEM, ..BuildOptions::default() };
         build_scene(std::slice::from_ref(&mesh), &out, &opts, progress)?;
         progress.finish();
-        let scene = Arc::new(Scene::open(&out)?);
+        let scene = in_core(Scene::open(&out)?)?;
         let what = match src {
             Source::Gen { text, .. } => format!("generated {text} and built it"),
             _ => format!("built from {}", mesh.display()),

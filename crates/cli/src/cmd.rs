@@ -388,6 +388,10 @@ fn save(img: &megaray_render::Image, out: &Path, exr: bool, exposure: f32, curve
     Ok(())
 }
 
+/// The largest scene file an unpaged render checks whole before its first frame (about a
+/// second of reading and hashing, which traversal would mostly do anyway).
+const CHECK_AT_ONCE: u64 = 1 << 30;
+
 pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     if !(1..=65536).contains(&a.spp) {
         bail!("--spp must be 1..=65536");
@@ -489,7 +493,15 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     let stop = Stop { frames: a.frames, time: a.time.map(Duration::from_secs_f64) };
     let tracer = match &pager {
         Some(p) => Tracer::paged(p),
-        None => Tracer::new(&scene),
+        None => {
+            // Unpaged, a scene small enough to read at once has all its tiles checked now,
+            // so that its tracer skips the checks on the way (a faster kernel); a larger
+            // one is checked tile by tile as rays first enter them.
+            if scene.bytes().len() as u64 <= CHECK_AT_ONCE {
+                scene.check_all_tiles();
+            }
+            Tracer::new(&scene)
+        }
     };
     if let Some(spec) = &a.orbit {
         let o = crate::paging::parse_orbit(spec)?;

@@ -59,6 +59,11 @@ fn corrupt_scene_files() {
     let p = write("tile.mray", &b);
     fails(&["render", &p, "-o", o, "--res", "64x64"], &["tile.mray", "tile", "checksum"]);
     fails(&["info", "--verify", &p], &["tile.mray", "checksum"]);
+    // The benchmark checks every tile before it traces.
+    fails(
+        &["bench", &p, "--kinds", "primary_1", "--res", "16x16", "--reps", "1", "--min-ms", "1"],
+        &["tile.mray", "checksum"],
+    );
     assert!(!out.exists(), "no image is written from a corrupt scene");
     fails(&["info", "/nonexistent/x.mray"], &["x.mray", "cannot open"]);
 }

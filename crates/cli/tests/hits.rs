@@ -38,7 +38,8 @@ fn check(scene_path: &std::path::Path, expect_tris: u64) {
     assert_eq!(scene.header().tri_count, expect_tris);
     let tris = all_tris(&scene);
     assert_eq!(tris.len() as u64, expect_tris);
-    let tracer = Tracer::new(&scene);
+    // Reading the triangles checked every tile: first the kernel that checks them anyway.
+    let tracer = Tracer::new(&scene).with_tile_checks();
     let b = scene.header().bounds;
     let (lo, ext) = (b.lo(), b.extent());
     let mut rng = Rng(7);
@@ -53,18 +54,29 @@ fn check(scene_path: &std::path::Path, expect_tris: u64) {
             }
         })
         .collect();
-    let bad: Vec<String> = rays
-        .par_iter()
-        .enumerate()
-        .filter_map(|(i, r)| {
-            let want = brute(&tris, r);
-            let got = tracer.intersect(r).map(|h| h.t);
-            let occ = tracer.occluded(r);
-            (want != got || occ != want.is_some()).then(|| format!("ray {i}: brute {want:?} tracer {got:?} any {occ}"))
-        })
-        .collect();
-    assert!(scene.first_error().is_none());
-    assert!(bad.is_empty(), "{} of 10000 rays differ, e.g. {:?}", bad.len(), &bad[..bad.len().min(5)]);
+    let want: Vec<Option<f32>> = rays.par_iter().map(|r| brute(&tris, r)).collect();
+    // With tile bookkeeping, then without (all tiles checked).
+    let compare = |tracer: &Tracer| {
+        let bad: Vec<String> = rays
+            .par_iter()
+            .zip(&want)
+            .enumerate()
+            .filter_map(|(i, (r, &want))| {
+                let got = tracer.intersect(r).map(|h| h.t);
+                let occ = tracer.occluded(r);
+                (want != got || occ != want.is_some())
+                    .then(|| format!("ray {i}: brute {want:?} tracer {got:?} any {occ}"))
+            })
+            .collect();
+        assert!(scene.first_error().is_none());
+        let mode = if tracer.skips_tile_checks() { "all tiles checked" } else { "tiles checked on entry" };
+        assert!(bad.is_empty(), "{mode}: {} of 10000 rays differ, e.g. {:?}", bad.len(), &bad[..bad.len().min(5)]);
+    };
+    compare(&tracer);
+    assert!(scene.check_all_tiles());
+    let tracer = Tracer::new(&scene);
+    assert!(tracer.skips_tile_checks());
+    compare(&tracer);
 }
 
 #[test]
@@ -189,7 +201,8 @@ fn packet_kernels_equal_single_rays() {
 /// in baseline SSE; on AVX2 the kernels for one octant of directions and the generic one)
 /// gives the same closest hits, bit for bit, and the same any-hit answers: on random rays,
 /// camera rays, and rays aimed exactly at vertices and edge midpoints; and again with the
-/// traversal stack overflowing into its spill.
+/// traversal stack overflowing into its spill; each with and without its tile bookkeeping
+/// (which a tracer skips when every tile is checked).
 #[test]
 fn single_ray_kernels_agree_across_isas() {
     use megaray_trace::packet::Isa;
@@ -218,16 +231,21 @@ fn single_ray_kernels_agree_across_isas() {
         }
     }
     let key = |h: Option<megaray_trace::Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.part, h.prim));
-    let reference = Tracer::new(&scene).with_isa(Isa::Baseline);
+    let reference = Tracer::new(&scene).with_isa(Isa::Baseline).with_tile_checks();
     let want: Vec<_> = rays.par_iter().map(|r| (key(reference.intersect(r)), reference.occluded(r))).collect();
     assert!(want.iter().filter(|w| w.0.is_some()).count() > rays.len() / 4, "enough hits to compare");
+    // Every tile checked: the kernels without tile bookkeeping, and those with it.
+    assert!(scene.check_all_tiles());
+    assert!(Tracer::new(&scene).skips_tile_checks());
     let kernels = Isa::available().iter().flat_map(|&isa| [(isa, None), (isa, Some(true)), (isa, Some(false))]);
-    for (isa, octants) in kernels {
+    for ((isa, octants), checks) in kernels.flat_map(|k| [(k, false), (k, true)]) {
         let tracer = match octants {
             None => Tracer::new(&scene).with_isa(isa),
             Some(always) => Tracer::new(&scene).with_isa(isa).with_octant_kernels(always),
         };
-        let isa = format!("{isa:?} (octant kernels {octants:?})");
+        let tracer = if checks { tracer.with_tile_checks() } else { tracer };
+        assert_eq!(tracer.skips_tile_checks(), !checks);
+        let isa = format!("{isa:?} (octant kernels {octants:?}, tile checks {checks})");
         let got: Vec<_> = rays.par_iter().map(|r| (key(tracer.intersect(r)), tracer.occluded(r))).collect();
         let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
         assert_eq!(bad, 0, "{isa}: {bad} of {} rays differ from the baseline kernel", rays.len());

@@ -160,3 +160,26 @@ fn the_top_level_tree_links_only_to_part_roots() {
         assert!(msg.contains("top.mray") && msg.contains("top-level node 0"), "{what}: {msg}");
     }
 }
+
+#[test]
+fn all_tiles_checked_counts_sound_tiles_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = dir.path().join("good.mray");
+    write_scene(&good);
+    let scene = Scene::open(&good).unwrap();
+    assert!(!scene.all_tiles_checked(), "tiles are checked on first use, not at open");
+    assert!(scene.tile_usable(1));
+    assert!(!scene.all_tiles_checked(), "one of two tiles checked");
+    assert!(scene.check_all_tiles());
+    assert!(scene.all_tiles_checked());
+    // A tile with a wrong reference: the others are checked, the scene never all sound.
+    let node1 = scene.tiles()[1].node0();
+    drop(scene);
+    let p = patched_copy(&good, "bad.mray", Some(0), 0, 1, ChildRef::inner(node1).0);
+    let scene = Scene::open(&p).unwrap();
+    assert!(!scene.check_all_tiles());
+    assert!(!scene.all_tiles_checked());
+    assert!(scene.tile_checked(1) && !scene.tile_usable(0));
+    let e = scene.first_error().expect("the fault is recorded");
+    assert_eq!(e.kind, SceneErrorKind::CorruptTile(0), "{e}");
+}

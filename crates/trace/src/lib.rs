@@ -519,6 +519,10 @@ pub struct Tracer<'s> {
     /// through the scene): a link into one of them needs nothing more. A paged tracer holds
     /// [`CheckedTiles::NONE`], so that it asks the pager at every link instead.
     checked: CheckedTiles<'s>,
+    /// Every tile was checked and found sound when this tracer was made (unpaged only,
+    /// [`Scene::all_tiles_checked`]): the single-ray kernel then follows links as it
+    /// follows inner nodes, with no tile to check or compare ([`Tracer::walk`]).
+    all_checked: bool,
     /// Which AVX2 single-ray kernels run: `None` chooses by the rays' coherence
     /// ([`Tracer::walk_on`]), `Some(true)` always the octant ones, `Some(false)` always the
     /// generic one (for tests).
@@ -565,6 +569,7 @@ impl<'s> Tracer<'s> {
             isa: packet::Isa::detect(),
             bounds: scene.header().bounds,
             checked: scene.checked_tiles(),
+            all_checked: scene.all_tiles_checked(),
             octant_kernels: None,
             root: match scene.parts() {
                 // The part's root, as the top-level tree links to it (in range: checked by
@@ -595,10 +600,24 @@ impl<'s> Tracer<'s> {
         self
     }
 
+    /// This tracer with its tile bookkeeping kept even when every tile is checked
+    /// ([`Tracer::skips_tile_checks`]): for tests that compare the kernels.
+    #[doc(hidden)]
+    pub fn with_tile_checks(mut self) -> Tracer<'s> {
+        self.all_checked = false;
+        self
+    }
+
+    /// Whether the single-ray kernel follows links with no tile to check (every tile of
+    /// the scene was checked when this unpaged tracer was made: [`Scene::check_all_tiles`]).
+    pub fn skips_tile_checks(&self) -> bool {
+        self.all_checked
+    }
+
     /// A tracer that reads only the tiles `pager` has made resident.
     pub fn paged(pager: &'s Pager) -> Tracer<'s> {
         let scene: &'s Scene = pager.scene();
-        Tracer { pager: Some(pager), checked: CheckedTiles::NONE, ..Tracer::new(scene) }
+        Tracer { pager: Some(pager), checked: CheckedTiles::NONE, all_checked: false, ..Tracer::new(scene) }
     }
 
     /// The pager, for a paged tracer.
@@ -1065,6 +1084,15 @@ impl<'s> Tracer<'s> {
     /// come at random; measured +7% on them). Both give the same hits (tested).
     #[inline(always)]
     fn walk_on<const AVX: bool, const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        match self.all_checked {
+            true => self.walk_on_k::<AVX, ANY, true>(w, ray),
+            false => self.walk_on_k::<AVX, ANY, false>(w, ray),
+        }
+    }
+
+    /// [`Tracer::walk_on`] for the tracer's `ALL` ([`Tracer::all_checked`]).
+    #[inline(always)]
+    fn walk_on_k<const AVX: bool, const ANY: bool, const ALL: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             let oct = RayBox::octant(ray);
@@ -1088,31 +1116,31 @@ impl<'s> Tracer<'s> {
             // (`Tracer::traverse`).
             return unsafe {
                 match kernel {
-                    0 => self.walk_avx2::<ANY, 0>(w, ray),
-                    1 => self.walk_avx2::<ANY, 1>(w, ray),
-                    2 => self.walk_avx2::<ANY, 2>(w, ray),
-                    3 => self.walk_avx2::<ANY, 3>(w, ray),
-                    4 => self.walk_avx2::<ANY, 4>(w, ray),
-                    5 => self.walk_avx2::<ANY, 5>(w, ray),
-                    6 => self.walk_avx2::<ANY, 6>(w, ray),
-                    7 => self.walk_avx2::<ANY, 7>(w, ray),
-                    _ => self.walk_avx2::<ANY, 8>(w, ray),
+                    0 => self.walk_avx2::<ANY, ALL, 0>(w, ray),
+                    1 => self.walk_avx2::<ANY, ALL, 1>(w, ray),
+                    2 => self.walk_avx2::<ANY, ALL, 2>(w, ray),
+                    3 => self.walk_avx2::<ANY, ALL, 3>(w, ray),
+                    4 => self.walk_avx2::<ANY, ALL, 4>(w, ray),
+                    5 => self.walk_avx2::<ANY, ALL, 5>(w, ray),
+                    6 => self.walk_avx2::<ANY, ALL, 6>(w, ray),
+                    7 => self.walk_avx2::<ANY, ALL, 7>(w, ray),
+                    _ => self.walk_avx2::<ANY, ALL, 8>(w, ray),
                 }
             };
         }
-        self.walk_baseline::<ANY>(w, ray)
+        self.walk_baseline::<ANY, ALL>(w, ray)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[inline(never)]
-    fn walk_avx2<const ANY: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        self.walk::<true, ANY, OCT>(w, ray)
+    fn walk_avx2<const ANY: bool, const ALL: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        self.walk::<true, ANY, ALL, OCT>(w, ray)
     }
 
     #[inline(never)]
-    fn walk_baseline<const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        self.walk::<false, ANY, { usize::MAX }>(w, ray)
+    fn walk_baseline<const ANY: bool, const ALL: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        self.walk::<false, ANY, ALL, { usize::MAX }>(w, ray)
     }
 
     /// The hot loop of the single-ray kernel. Near-first: of the children a node's box test
@@ -1126,9 +1154,15 @@ impl<'s> Tracer<'s> {
     /// as an [`Event`], the walk's state saved in `w`: a link into a tile that is paged or not
     /// checked yet, an edge exactly on the ray, a full or empty fixed stack, an any-hit.
     /// Entries popped from a tile other than the open one reopen it without a check on an
-    /// unpaged tracer: the traversal entered it through a link before.
+    /// unpaged tracer: the traversal entered it through a link before. With `ALL` (every
+    /// tile checked, [`Tracer::all_checked`]) there is nothing to check at all: a link is
+    /// an inner node whose tile goes into `c`, and a pop moves its entry's tile into `c`.
     #[inline(always)]
-    fn walk<const AVX: bool, const ANY: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+    fn walk<const AVX: bool, const ANY: bool, const ALL: bool, const OCT: usize>(
+        &self,
+        w: &mut Walk<'_>,
+        ray: &Ray,
+    ) -> Event {
         // The ray's constants, made here rather than passed in: the loop then holds them in
         // registers without a copy (events are rare, and the few that come back remake them).
         let mut rb = RayBox::new(ray);
@@ -1169,7 +1203,10 @@ impl<'s> Tracer<'s> {
             // traversal entered before: unpaged, it is still there and checked. Paged, it may
             // have been evicted while the ray was pending: the pager is asked again (a ray
             // needs one tile at a time). (A link or part names its own tile.)
-            if (e.r as i64) >= 0 && e.arr != c {
+            if ALL {
+                // Every tile is checked: the popped entry's tile is open by moving its name.
+                c = e.arr;
+            } else if (e.r as i64) >= 0 && e.arr != c {
                 if self.pager.is_none() || e.arr == TOP {
                     c = e.arr;
                 } else {
@@ -1186,7 +1223,14 @@ impl<'s> Tracer<'s> {
                 // indirect branch that predicts worse). An empty slot is caught with the parts.
                 // References hold absolute positions: no tile needs looking up to follow one.
                 let leaf_or_part = r & (1 << 62) != 0;
-                let node = if (r as i64) >= 0 {
+                let node = if ALL && !leaf_or_part {
+                    // Every tile checked: an inner node, or a link that opens its tile by
+                    // naming it (chosen without a branch: inner nodes and links come mixed).
+                    let link = ((r as i64) >> 63) as u32;
+                    let tile = ((r >> 36) as u32) & ChildRef::MAX_TILE;
+                    c = (c & !link) | (tile & link);
+                    r & ChildRef::MAX_NODE
+                } else if (r as i64) >= 0 {
                     if leaf_or_part {
                         // A leaf: `count` triangles from the block at `unit`.
                         let (mut unit, mut left) = (r & ChildRef::MAX_UNIT, ((r >> 40) & 0xff) as u32);
