@@ -25,15 +25,81 @@ pub struct BvhConfig {
     pub parallel_above: usize,
 }
 
+/// The binary tree while building. Its top (the nodes the build splits in parallel) is
+/// boxed; each subtree built by one thread is a [`Flat`] array, one allocation in the order
+/// the collapse reads it.
 enum BNode {
-    Leaf { bounds: Aabb, start: u32, count: u32 },
     Inner { bounds: Aabb, kids: Box<[BNode; 2]> },
+    Flat(Flat),
 }
 
-impl BNode {
-    fn bounds(&self) -> &Aabb {
-        match self {
-            BNode::Leaf { bounds, .. } | BNode::Inner { bounds, .. } => bounds,
+/// A binary subtree in one array, in pre-order: node 0 is its root, an inner node's left
+/// child follows it and `right` says where its right child is.
+struct Flat(Vec<FNode>);
+
+/// A node of a [`Flat`] subtree: a leaf of primitives `start..start + count` (`count` with
+/// [`FNode::LEAF`] set), or an inner node whose right child is node `b`.
+#[derive(Clone, Copy)]
+struct FNode {
+    bounds: Aabb,
+    a: u32,
+    b: u32,
+}
+const _: () = assert!(std::mem::size_of::<FNode>() == 32);
+
+impl FNode {
+    const LEAF: u32 = 1 << 31;
+}
+
+/// A node of the binary tree, whichever way it is stored: what the collapse walks.
+#[derive(Clone, Copy)]
+enum BRef<'a> {
+    Boxed(&'a BNode),
+    Flat(&'a [FNode], u32),
+}
+
+impl<'a> BRef<'a> {
+    fn of(n: &'a BNode) -> BRef<'a> {
+        match n {
+            BNode::Inner { .. } => BRef::Boxed(n),
+            BNode::Flat(f) => BRef::Flat(&f.0, 0),
+        }
+    }
+
+    fn bounds(&self) -> Aabb {
+        match *self {
+            BRef::Boxed(BNode::Inner { bounds, .. }) => *bounds,
+            BRef::Boxed(BNode::Flat(f)) => f.0[0].bounds,
+            BRef::Flat(f, i) => f[i as usize].bounds,
+        }
+    }
+
+    /// `Some((start, count))` for a leaf.
+    fn leaf(&self) -> Option<(u32, u32)> {
+        match *self {
+            BRef::Boxed(BNode::Inner { .. }) => None,
+            BRef::Boxed(BNode::Flat(f)) => BRef::Flat(&f.0, 0).leaf(),
+            BRef::Flat(f, i) => {
+                let n = f[i as usize];
+                (n.b & FNode::LEAF != 0).then_some((n.a, n.b & !FNode::LEAF))
+            }
+        }
+    }
+
+    /// The two children of an inner node.
+    fn kids(&self) -> [BRef<'a>; 2] {
+        match *self {
+            BRef::Boxed(BNode::Inner { kids, .. }) => [BRef::of(&kids[0]), BRef::of(&kids[1])],
+            BRef::Boxed(BNode::Flat(f)) => BRef::Flat(&f.0, 0).kids(),
+            BRef::Flat(f, i) => [BRef::Flat(f, i + 1), BRef::Flat(f, f[i as usize].b)],
+        }
+    }
+
+    /// Half the surface area of an inner node, -1 for a leaf (never opened).
+    fn area(&self) -> f32 {
+        match self.leaf() {
+            Some(_) => -1.0,
+            None => self.bounds().half_area(),
         }
     }
 }
@@ -152,11 +218,12 @@ pub fn build_bvh_of(n: usize, box_of: impl Fn(usize) -> Aabb + Sync, cfg: BvhCon
     let order: Vec<u32> =
         if parallel { refs.par_iter().map(|r| r.id()).collect() } else { refs.iter().map(|r| r.id()).collect() };
     drop(refs);
-    let bounds = *root.bounds();
+    let root_ref = BRef::of(&root);
+    let bounds = root_ref.bounds();
     let mut nodes = Vec::new();
     // The top two levels of 8-wide nodes collapse their subtrees in parallel (up to 64
     // tasks); the layout is the same as a serial collapse.
-    let depth = collapse(&root, &mut nodes, if parallel { 2 } else { 0 });
+    let depth = collapse(root_ref, &mut nodes, if parallel { 2 } else { 0 });
     Bvh { nodes, order, bounds, depth }
 }
 
@@ -164,14 +231,44 @@ struct Ctx {
     cfg: BvhConfig,
 }
 
+/// Where a split puts its two sides: the boxed top of the tree (split in parallel), or a
+/// [`Flat`] subtree's array.
+enum Out<'a> {
+    Top,
+    Flat(&'a mut Vec<FNode>),
+}
+
 impl Ctx {
+    /// The tree over `refs`: split in parallel (boxed nodes) while larger than
+    /// `parallel_above`, below that one [`Flat`] subtree per thread's task.
     fn build(&self, refs: &mut [PrimRef], ext: Extent, start: u32) -> BNode {
+        if refs.len() > self.cfg.parallel_above {
+            if let Some(n) = self.split(refs, ext, start, &mut Out::Top) {
+                return n;
+            }
+        }
+        // A leaf at the top is a flat tree of one node too.
+        let mut flat = Vec::with_capacity(refs.len());
+        self.split(refs, ext, start, &mut Out::Flat(&mut flat));
+        BNode::Flat(Flat(flat))
+    }
+
+    /// Splits `refs` (or makes them a leaf) into `out`. For [`Out::Top`], returns the
+    /// boxed node, or `None` when `refs` make a leaf (for the caller to put in a flat tree);
+    /// for [`Out::Flat`], pushes the subtree in pre-order and returns `None`.
+    fn split(&self, refs: &mut [PrimRef], ext: Extent, start: u32, out: &mut Out<'_>) -> Option<BNode> {
         let n = refs.len();
         let bounds = ext.bounds();
+        let leaf = |out: &mut Out<'_>| {
+            if let Out::Flat(v) = out {
+                v.push(FNode { bounds, a: start, b: n as u32 | FNode::LEAF });
+            }
+            None
+        };
         // One block's worth is always a leaf: splitting it costs a traversal step (C_TRAV)
         // plus at least one block test, against the leaf's one block test.
         if n <= 1 || (n <= self.cfg.max_leaf && n as u32 <= BLOCK) {
-            return BNode::Leaf { bounds, start, count: n as u32 };
+            return leaf(out);
         }
         // Binned SAH over all three axes in one pass; fewer bins for small nodes, where the
         // per-node cost of clearing and sweeping bins would dominate.
@@ -188,7 +285,7 @@ impl Ctx {
         let split_cost = C_TRAV + best.0 / parent_area;
         let leaf_cost = blocks(n as u32);
         if n <= self.cfg.max_leaf && (leaf_cost <= split_cost || !best.0.is_finite()) {
-            return BNode::Leaf { bounds, start, count: n as u32 };
+            return leaf(out);
         }
         let (mid, le, re) = if best.0.is_finite() {
             let (axis, s) = (best.1, best.2);
@@ -207,12 +304,23 @@ impl Ctx {
             (mid, le, re)
         };
         let (l, r) = refs.split_at_mut(mid);
-        let (ln, rn) = if n > self.cfg.parallel_above {
-            rayon::join(|| self.build(l, le, start), || self.build(r, re, start + mid as u32))
-        } else {
-            (self.build(l, le, start), self.build(r, re, start + mid as u32))
-        };
-        BNode::Inner { bounds, kids: Box::new([ln, rn]) }
+        let rstart = start + mid as u32;
+        match out {
+            Out::Top => {
+                let (ln, rn) = rayon::join(|| self.build(l, le, start), || self.build(r, re, rstart));
+                Some(BNode::Inner { bounds, kids: Box::new([ln, rn]) })
+            }
+            Out::Flat(v) => {
+                // The node first (pre-order), its right child's position filled in after
+                // the left subtree.
+                let me = v.len();
+                v.push(FNode { bounds, a: 0, b: 0 });
+                self.split(l, le, start, &mut Out::Flat(v));
+                v[me].b = v.len() as u32;
+                self.split(r, re, rstart, &mut Out::Flat(v));
+                None
+            }
+        }
     }
 }
 
@@ -393,33 +501,35 @@ fn partition(v: &mut [PrimRef], pred: impl Fn(&PrimRef) -> bool) -> (usize, Exte
     (i, le, re)
 }
 
-/// Collapses the binary tree into 8-wide nodes (pre-order); returns the depth.
-fn collapse(root: &BNode, out: &mut Vec<NodeB>, par: u32) -> u32 {
-    match root {
-        BNode::Leaf { bounds, start, count } => {
-            // A tree that is a single leaf: a root node with one leaf child.
-            let mut n = NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] };
-            n.bounds[0] = *bounds;
-            n.kids[0] = Kid::Leaf { start: *start, count: *count };
-            out.push(n);
-            1
-        }
-        BNode::Inner { .. } => collapse_inner(root, out, par),
+/// Collapses the binary tree into 8-wide nodes (pre-order) in `out`; returns the depth. The
+/// top `par` levels of 8-wide nodes are laid out first (their subtrees' sizes counted in
+/// parallel), then their subtrees are written in parallel, each straight into its own range
+/// of `out`: no subtree is built apart and copied, so each node is written once.
+fn collapse(root: BRef<'_>, out: &mut Vec<NodeB>, par: u32) -> u32 {
+    let empty = NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] };
+    if let Some((start, count)) = root.leaf() {
+        // A tree that is a single leaf: a root node with one leaf child.
+        let mut n = empty;
+        n.bounds[0] = root.bounds();
+        n.kids[0] = Kid::Leaf { start, count };
+        out.push(n);
+        return 1;
     }
+    let sizes = Sizes::of(root, par);
+    use rayon::prelude::*;
+    // Filled in parallel, so that the pages are first touched by many threads.
+    out.par_extend(rayon::iter::repeat_n(empty, sizes.total));
+    fill(root, &sizes, out, 0)
 }
 
-/// Collapses the subtree at binary node `node` into `out` (its root first); its children's
-/// subtrees are collapsed in parallel for `par` more levels.
-fn collapse_inner(node: &BNode, out: &mut Vec<NodeB>, par: u32) -> u32 {
-    let BNode::Inner { kids, .. } = node else { unreachable!() };
+/// The 8-wide slots of binary inner node `node`: its children, the inner one of largest
+/// surface area opened (replaced by its two children) until there are eight or only leaves.
+fn slots_of(node: BRef<'_>) -> ([BRef<'_>; NODE_WIDTH], usize) {
+    let kids = node.kids();
     // The slots, in order, with the area of each inner one (-1 for leaves: never opened).
-    let mut slot: [&BNode; NODE_WIDTH] = [&kids[0]; NODE_WIDTH];
+    let mut slot: [BRef<'_>; NODE_WIDTH] = [kids[0]; NODE_WIDTH];
     let mut area = [-1f32; NODE_WIDTH];
-    let area_of = |n: &BNode| match n {
-        BNode::Inner { bounds, .. } => bounds.half_area(),
-        BNode::Leaf { .. } => -1.0,
-    };
-    (slot[1], area[0], area[1]) = (&kids[1], area_of(&kids[0]), area_of(&kids[1]));
+    (slot[1], area[0], area[1]) = (kids[1], kids[0].area(), kids[1].area());
     let mut len = 2;
     while len < NODE_WIDTH {
         // Open the inner child with the largest surface area (the last of equal ones, as `max_by`).
@@ -433,60 +543,93 @@ fn collapse_inner(node: &BNode, out: &mut Vec<NodeB>, par: u32) -> u32 {
         if i == usize::MAX {
             break;
         }
-        let BNode::Inner { kids, .. } = slot[i] else { unreachable!() };
+        let kids = slot[i].kids();
         slot.copy_within(i + 1..len, i + 2);
         area.copy_within(i + 1..len, i + 2);
-        (slot[i], slot[i + 1]) = (&kids[0], &kids[1]);
-        (area[i], area[i + 1]) = (area_of(&kids[0]), area_of(&kids[1]));
+        (slot[i], slot[i + 1]) = (kids[0], kids[1]);
+        (area[i], area[i + 1]) = (kids[0].area(), kids[1].area());
         len += 1;
     }
-    let slots = &slot[..len];
-    let me = out.len();
-    out.push(NodeB { bounds: [Aabb::EMPTY; NODE_WIDTH], kids: [Kid::Empty; NODE_WIDTH] });
-    let mut depth = 0;
-    if par > 0 {
+    (slot, len)
+}
+
+/// The number of 8-wide nodes of the subtree at binary inner node `node`, and (for the
+/// top levels that are written in parallel) those of its inner slots' subtrees.
+struct Sizes {
+    total: usize,
+    /// One per slot for a node of the top levels (0 for leaf slots); empty below them.
+    kids: Vec<Sizes>,
+}
+
+impl Sizes {
+    fn of(node: BRef<'_>, par: u32) -> Sizes {
+        if par == 0 {
+            return Sizes { total: count(node), kids: Vec::new() };
+        }
+        let (slot, len) = slots_of(node);
         use rayon::prelude::*;
-        // Each inner child's subtree into its own vector (indices relative to its start),
-        // then appended in slot order with its indices shifted: the serial layout.
-        let subs: Vec<(Vec<NodeB>, u32)> = slots
+        let kids: Vec<Sizes> = slot[..len]
             .par_iter()
-            .map(|s| match s {
-                BNode::Inner { .. } => {
-                    let mut v = Vec::new();
-                    let d = collapse_inner(s, &mut v, par - 1);
-                    (v, d)
-                }
-                BNode::Leaf { .. } => (Vec::new(), 0),
+            .map(|s| match s.leaf() {
+                Some(_) => Sizes { total: 0, kids: Vec::new() },
+                None => Sizes::of(*s, par - 1),
             })
             .collect();
-        for (k, (s, (sub, d))) in slots.iter().zip(subs).enumerate() {
-            out[me].bounds[k] = *s.bounds();
-            out[me].kids[k] = match s {
-                BNode::Leaf { start, count, .. } => Kid::Leaf { start: *start, count: *count },
-                BNode::Inner { .. } => {
-                    let base = out.len() as u32;
-                    out.extend(sub.into_iter().map(|mut n| {
-                        for kid in &mut n.kids {
-                            if let Kid::Inner(c) = kid {
-                                *c += base;
-                            }
-                        }
-                        n
-                    }));
-                    depth = depth.max(d);
-                    Kid::Inner(base)
-                }
-            };
-        }
-        return depth + 1;
+        Sizes { total: 1 + kids.iter().map(|k| k.total).sum::<usize>(), kids }
     }
-    for (k, s) in slots.iter().enumerate() {
-        out[me].bounds[k] = *s.bounds();
-        out[me].kids[k] = match s {
-            BNode::Leaf { start, count, .. } => Kid::Leaf { start: *start, count: *count },
-            BNode::Inner { .. } => {
-                let child = out.len() as u32;
-                depth = depth.max(collapse_inner(s, out, 0));
+}
+
+/// The number of 8-wide nodes of the subtree at binary inner node `node`.
+fn count(node: BRef<'_>) -> usize {
+    let (slot, len) = slots_of(node);
+    1 + slot[..len].iter().filter(|s| s.leaf().is_none()).map(|s| count(*s)).sum::<usize>()
+}
+
+/// Writes the subtree at binary inner node `node` into `out` (exactly its size), its root
+/// first; `base` is the index of `out[0]` in the whole array. Returns its depth.
+fn fill(node: BRef<'_>, sizes: &Sizes, out: &mut [NodeB], base: u32) -> u32 {
+    if sizes.kids.is_empty() {
+        let mut at = 0;
+        let depth = fill_serial(node, out, &mut at, base);
+        assert_eq!(at, out.len(), "the subtree has the size counted");
+        return depth;
+    }
+    let (slot, len) = slots_of(node);
+    let (me, mut rest) = out.split_first_mut().expect("room for the node");
+    let mut at = base + 1;
+    // Each inner slot's subtree gets its range, and all are written in parallel.
+    let mut jobs = Vec::new();
+    for (k, s) in slot[..len].iter().enumerate() {
+        me.bounds[k] = s.bounds();
+        me.kids[k] = match s.leaf() {
+            Some((start, count)) => Kid::Leaf { start, count },
+            None => {
+                let n = sizes.kids[k].total;
+                let (mine, r) = std::mem::take(&mut rest).split_at_mut(n);
+                rest = r;
+                jobs.push((*s, &sizes.kids[k], mine, at));
+                at += n as u32;
+                Kid::Inner(at - n as u32)
+            }
+        };
+    }
+    use rayon::prelude::*;
+    jobs.into_par_iter().map(|(s, z, out, b)| fill(s, z, out, b)).max().unwrap_or(0) + 1
+}
+
+/// [`fill`] below the top levels: depth-first from `out[*at]`, which is node `base + *at`.
+fn fill_serial(node: BRef<'_>, out: &mut [NodeB], at: &mut usize, base: u32) -> u32 {
+    let (slot, len) = slots_of(node);
+    let me = *at;
+    *at += 1;
+    let mut depth = 0;
+    for (k, s) in slot[..len].iter().enumerate() {
+        out[me].bounds[k] = s.bounds();
+        out[me].kids[k] = match s.leaf() {
+            Some((start, count)) => Kid::Leaf { start, count },
+            None => {
+                let child = base + *at as u32;
+                depth = depth.max(fill_serial(*s, out, at, base));
                 Kid::Inner(child)
             }
         };
@@ -525,6 +668,34 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&c| c == 1));
+    }
+
+    /// Trees of a few primitives (a lone leaf at the root, boxed nodes over flat subtrees of
+    /// one leaf) come out the same serial and parallel, every primitive in one leaf.
+    #[test]
+    fn tiny_trees_serial_and_parallel() {
+        for n in 1..=40usize {
+            let boxes: Vec<Aabb> =
+                (0..n).map(|i| Aabb { min: [i as f32, 0.0, (i % 3) as f32], max: [i as f32 + 0.5, 1.0, 1.0] }).collect();
+            let serial = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX });
+            let par = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 2 });
+            assert_eq!(serial.order, par.order, "{n} primitives");
+            assert_eq!(serial.depth, par.depth, "{n} primitives");
+            assert_eq!(serial.nodes.len(), par.nodes.len(), "{n} primitives");
+            let mut seen = vec![0u32; n];
+            for (a, b) in serial.nodes.iter().zip(&par.nodes) {
+                assert_eq!(a.kids, b.kids);
+                assert_eq!(a.bounds, b.bounds);
+                for kid in &a.kids {
+                    if let Kid::Leaf { start, count } = kid {
+                        for &p in &serial.order[*start as usize..(*start + *count) as usize] {
+                            seen[p as usize] += 1;
+                        }
+                    }
+                }
+            }
+            assert!(seen.iter().all(|&c| c == 1), "{n} primitives: each in one leaf");
+        }
     }
 
     /// The parallel build (parallel reference setup, subtrees and collapse) lays out exactly

@@ -102,8 +102,14 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
     // triangle sources, concatenated in tile order afterwards).
     use rayon::prelude::*;
     let emit = |(t, list): (usize, &Vec<u32>)| {
-        let mut blob = TileBlob { nodes: Vec::with_capacity(list.len()), blocks: Vec::new() };
-        let mut src = Vec::new();
+        // Sized up front: each tile's arrays are allocated once, never regrown.
+        let nblocks: usize = list
+            .iter()
+            .flat_map(|&n| nodes[n as usize].kids)
+            .map(|k| if let Kid::Leaf { count, .. } = k { count.div_ceil(4) as usize } else { 0 })
+            .sum();
+        let mut blob = TileBlob { nodes: Vec::with_capacity(list.len()), blocks: Vec::with_capacity(nblocks) };
+        let mut src = Vec::with_capacity(4 * nblocks);
         for &n in list {
             let mut out = Node8::EMPTY;
             for (k, kid) in nodes[n as usize].kids.iter().enumerate() {
