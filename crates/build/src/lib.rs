@@ -229,18 +229,22 @@ pub fn build_scene(
     progress.stage("build parts", triangles);
     let single = parts.len() == 1;
     let attrs = &attrs;
-    pool.install(|| {
+    let built = pool.install(|| {
         use rayon::prelude::*;
         parts.par_iter().enumerate().with_max_len(1).try_for_each(|(i, p)| -> Result<(), BuildError> {
             check_cancel(opts)?;
             let blob = build_part(p, attrs, opts, single, &io)?;
             let n = blob.tri_count;
-            writer.lock().unwrap_or_else(|e| e.into_inner()).append_part(i as u32, blob)?;
+            writer.lock().unwrap_or_else(|e| e.into_inner()).append_part(i as u32, &blob)?;
+            recycle_part(blob);
             let _ = std::fs::remove_file(&p.path);
             progress.inc(n);
             Ok(())
         })
-    })?;
+    });
+    // The arrays kept from part to part are not kept past the build.
+    release_spare();
+    built?;
     progress.finish();
     let writer = writer.into_inner().unwrap_or_else(|e| e.into_inner());
     let tiles = writer.tile_count();
@@ -289,7 +293,22 @@ pub fn top_level(boxes: &[Aabb]) -> (Vec<Node8>, u32) {
             out
         })
         .collect();
-    (nodes, bvh.depth)
+    let depth = bvh.depth;
+    bvh::recycle(bvh);
+    (nodes, depth)
+}
+
+/// Gives the tile arrays of a part that is written (or no longer needed) to the next
+/// part's build, which would otherwise fault in fresh memory for them.
+pub fn recycle_part(blob: PartBlob) {
+    tiles::recycle(blob.tiles);
+}
+
+/// Frees the arrays kept for later builds ([`recycle_part`]; [`build_scene`] does this when
+/// it ends). Builds after it start from fresh memory again.
+pub fn release_spare() {
+    bvh::release_spare();
+    tiles::release_spare();
 }
 
 /// Loads one part's stream, builds its tree, cuts it into tiles and gathers its attributes.
@@ -351,5 +370,46 @@ pub fn build_in_core(tris: &[[[f32; 3]; 3]], tile_target: u32, parallel: bool) -
         tiles: tiled.tiles,
         ..PartBlob::default()
     };
+    bvh::recycle(bvh);
     (blob, tiled.tri_source)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A build into arrays kept from an earlier one ([`recycle_part`], [`bvh::recycle`])
+    /// makes exactly the tiles and slots of a build into fresh ones, for a smaller model
+    /// after a larger one and the other way round.
+    #[test]
+    fn recycled_arrays_give_the_same_parts() {
+        let model = |n: usize| -> Vec<[[f32; 3]; 3]> {
+            (0..n)
+                .map(|i| {
+                    let (x, y) = ((i % 300) as f32, (i / 300) as f32);
+                    [[x, y, (i % 7) as f32], [x + 1.0, y, 0.0], [x, y + 1.0, (i % 5) as f32]]
+                })
+                .collect()
+        };
+        let bytes = |p: &PartBlob| -> Vec<(Vec<u8>, Vec<u8>)> {
+            p.tiles
+                .iter()
+                .map(|t| (bytemuck::cast_slice(&t.nodes).to_vec(), bytemuck::cast_slice(&t.blocks).to_vec()))
+                .collect()
+        };
+        let (big, small) = (model(60_000), model(7_000));
+        let fresh_big = build_in_core(&big, 16 << 10, true);
+        let fresh_small = build_in_core(&small, 16 << 10, true);
+        let want = [(bytes(&fresh_big.0), fresh_big.1.clone()), (bytes(&fresh_small.0), fresh_small.1.clone())];
+        recycle_part(fresh_big.0);
+        recycle_part(fresh_small.0);
+        for round in 0..2 {
+            for (k, tris) in [&small, &big].into_iter().enumerate() {
+                let (blob, src) = build_in_core(tris, 16 << 10, round == 0);
+                let w = &want[1 - k];
+                assert!(bytes(&blob) == w.0 && src == w.1, "round {round}, model {k}: differs from a fresh build");
+                recycle_part(blob);
+            }
+        }
+    }
 }

@@ -9,7 +9,27 @@
 use megaray_scene::format::{Node8, Tri4, NODE_BYTES};
 use megaray_scene::{BlobRef, TileBlob};
 
-use crate::bvh::{Bvh, Kid};
+use crate::bvh::{Bvh, Kid, Spare};
+
+/// Tile arrays of parts written, for the next part's tiles ([`Spare`]): as many as a few
+/// parts' tiles. Every array is made with room for a whole tile of the target size, so that
+/// any kept one fits any tile of the next part.
+static SPARE_NODES: Spare<Node8> = Spare::new(8192);
+static SPARE_BLOCKS: Spare<Tri4> = Spare::new(8192);
+
+/// Frees the tile arrays kept by [`recycle`].
+pub fn release_spare() {
+    SPARE_NODES.clear();
+    SPARE_BLOCKS.clear();
+}
+
+/// Keeps the arrays of `tiles` for later parts ([`SPARE_NODES`]).
+pub fn recycle(tiles: Vec<TileBlob>) {
+    for t in tiles {
+        SPARE_NODES.give(t.nodes);
+        SPARE_BLOCKS.give(t.blocks);
+    }
+}
 
 /// The tiles of one part.
 pub struct Tiled {
@@ -108,7 +128,10 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
             .flat_map(|&n| nodes[n as usize].kids)
             .map(|k| if let Kid::Leaf { count, .. } = k { count.div_ceil(4) as usize } else { 0 })
             .sum();
-        let mut blob = TileBlob { nodes: Vec::with_capacity(list.len()), blocks: Vec::with_capacity(nblocks) };
+        let (mut tn, mut tb) = (SPARE_NODES.take(), SPARE_BLOCKS.take());
+        tn.reserve(list.len().max(target as usize / NODE_BYTES));
+        tb.reserve(nblocks.max(target as usize / std::mem::size_of::<Tri4>()));
+        let mut blob = TileBlob { nodes: tn, blocks: tb };
         let mut src = Vec::with_capacity(4 * nblocks);
         for &n in list {
             let mut out = Node8::EMPTY;

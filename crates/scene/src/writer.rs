@@ -196,7 +196,7 @@ impl SceneWriter {
     }
 
     /// Appends part `index`: its tiles (page aligned), then its attribute arrays.
-    pub fn append_part(&mut self, index: u32, part: PartBlob) -> Result<(), SceneError> {
+    pub fn append_part(&mut self, index: u32, part: &PartBlob) -> Result<(), SceneError> {
         assert!(index < self.part_count && self.parts[index as usize].is_none());
         let first_tile = self.tiles.len() as u32;
         let tri_count = part.tri_count;

@@ -44,7 +44,7 @@ fn write_scene(path: &Path) {
         root_node: 0,
         ..Default::default()
     };
-    w.append_part(0, part).unwrap();
+    w.append_part(0, &part).unwrap();
     w.finish(bx, 0, &[]).unwrap();
 }
 
