@@ -1193,7 +1193,9 @@ impl<'s> Tracer<'s> {
                     }
                     sp -= 1;
                     let e = w.fixed[sp % STACK];
-                    if e.t > t_best * BOX_EPS {
+                    // Beyond the closest hit: skipped. (An any-hit query's `t_best` is the
+                    // ray's end until it ends, so its entries are never beyond it.)
+                    if !ANY && e.t > t_best * BOX_EPS {
                         continue;
                     }
                     e
@@ -1287,7 +1289,8 @@ impl<'s> Tracer<'s> {
                 if mask == 0 {
                     continue 'walk;
                 }
-                let at = |k: u32| Entry { r: node.child[k as usize], arr, t: dist[k as usize] };
+                // (An any-hit query reads no entry distance: none is kept.)
+                let at = |k: u32| Entry { r: node.child[k as usize], arr, t: if ANY { 0.0 } else { dist[k as usize] } };
                 let mut push = |x: Entry| {
                     self.prefetch(x.r);
                     w.fixed[sp % STACK] = x;
