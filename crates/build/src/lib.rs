@@ -14,7 +14,9 @@
 //! 3. **Parts** ([`bvh`], [`tiles`]): each stream small enough is loaded and built in core
 //!    (binned SAH, collapsed to an 8-wide BVH), cut into page-aligned tiles and appended to the
 //!    scene file with its attributes. Parts build in parallel, as many at once as threads, each
-//!    sized so that all of them fit `build_mem` together.
+//!    sized so that all of them fit `build_mem` together. The builder's largest arrays pass
+//!    from one part to the next ([`recycle_part`]) rather than being faulted in afresh, and
+//!    are freed when the build ends ([`release_spare`]).
 //! 4. **Top level**: a BVH over the parts' boxes, written first in the file.
 //!
 //! Temporary files live in a folder next to the output and are removed on success, on error
