@@ -232,7 +232,14 @@ fn single_ray_kernels_agree_across_isas() {
     }
     let key = |h: Option<megaray_trace::Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.part, h.prim));
     let reference = Tracer::new(&scene).with_isa(Isa::Baseline).with_tile_checks();
+    // An any-hit query's hit (whichever it finds first: the same for every kernel, which
+    // visit in the same order), as `try_occluded` makes it.
+    let any_hit = |t: &Tracer, r: &Ray| match t.try_occluded(r) {
+        megaray_trace::Traced::Done(h) => key(h),
+        megaray_trace::Traced::Pending(_) => unreachable!("unpaged"),
+    };
     let want: Vec<_> = rays.par_iter().map(|r| (key(reference.intersect(r)), reference.occluded(r))).collect();
+    let want_any: Vec<_> = rays.par_iter().map(|r| any_hit(&reference, r)).collect();
     assert!(want.iter().filter(|w| w.0.is_some()).count() > rays.len() / 4, "enough hits to compare");
     // Every tile checked: the kernels without tile bookkeeping, and those with it.
     assert!(scene.check_all_tiles());
@@ -249,6 +256,9 @@ fn single_ray_kernels_agree_across_isas() {
         let got: Vec<_> = rays.par_iter().map(|r| (key(tracer.intersect(r)), tracer.occluded(r))).collect();
         let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
         assert_eq!(bad, 0, "{isa}: {bad} of {} rays differ from the baseline kernel", rays.len());
+        let got_any: Vec<_> = rays.par_iter().map(|r| any_hit(&tracer, r)).collect();
+        let bad = (0..rays.len()).filter(|&i| got_any[i] != want_any[i]).count();
+        assert_eq!(bad, 0, "{isa}: {bad} of {} any-hit hits differ from the baseline kernel's", rays.len());
         // The same with the stack full at the first node, so that entries spill to the heap
         // and come back (as a tree deeper than the fixed stack would make them).
         for pad in [60, 300] {
