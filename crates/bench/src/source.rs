@@ -85,11 +85,7 @@ pub struct Loaded {
 /// the kernel that skips tile bookkeeping, [`Scene::all_tiles_checked`]); a corrupt tile is
 /// the scene's error.
 fn in_core(scene: Scene) -> Result<Arc<Scene>, BenchError> {
-    if !scene.check_all_tiles() {
-        if let Some(e) = scene.first_error() {
-            return Err(e.into());
-        }
-    }
+    scene.verify_all()?;
     Ok(Arc::new(scene))
 }
 

@@ -54,22 +54,23 @@ impl FNode {
 /// A node of the binary tree, whichever way it is stored: what the collapse walks.
 #[derive(Clone, Copy)]
 enum BRef<'a> {
-    Boxed(&'a BNode),
+    /// A boxed inner node: its bounds and children.
+    Boxed(&'a Aabb, &'a [BNode; 2]),
+    /// Node `i` of a flat subtree.
     Flat(&'a [FNode], u32),
 }
 
 impl<'a> BRef<'a> {
     fn of(n: &'a BNode) -> BRef<'a> {
         match n {
-            BNode::Inner { .. } => BRef::Boxed(n),
+            BNode::Inner { bounds, kids } => BRef::Boxed(bounds, kids),
             BNode::Flat(f) => BRef::Flat(&f.0, 0),
         }
     }
 
     fn bounds(&self) -> Aabb {
         match *self {
-            BRef::Boxed(BNode::Inner { bounds, .. }) => *bounds,
-            BRef::Boxed(BNode::Flat(f)) => f.0[0].bounds,
+            BRef::Boxed(bounds, _) => *bounds,
             BRef::Flat(f, i) => f[i as usize].bounds,
         }
     }
@@ -77,8 +78,7 @@ impl<'a> BRef<'a> {
     /// `Some((start, count))` for a leaf.
     fn leaf(&self) -> Option<(u32, u32)> {
         match *self {
-            BRef::Boxed(BNode::Inner { .. }) => None,
-            BRef::Boxed(BNode::Flat(f)) => BRef::Flat(&f.0, 0).leaf(),
+            BRef::Boxed(..) => None,
             BRef::Flat(f, i) => {
                 let n = f[i as usize];
                 (n.b & FNode::LEAF != 0).then_some((n.a, n.b & !FNode::LEAF))
@@ -89,8 +89,7 @@ impl<'a> BRef<'a> {
     /// The two children of an inner node.
     fn kids(&self) -> [BRef<'a>; 2] {
         match *self {
-            BRef::Boxed(BNode::Inner { kids, .. }) => [BRef::of(&kids[0]), BRef::of(&kids[1])],
-            BRef::Boxed(BNode::Flat(f)) => BRef::Flat(&f.0, 0).kids(),
+            BRef::Boxed(_, kids) => [BRef::of(&kids[0]), BRef::of(&kids[1])],
             BRef::Flat(f, i) => [BRef::Flat(f, i + 1), BRef::Flat(f, f[i as usize].b)],
         }
     }
@@ -246,8 +245,10 @@ pub fn release_spare() {
 /// model are built one after another and benchmarks repeat builds, and fresh memory costs a
 /// page fault per 4 KiB when first written: 2.5-3.5 us each on a virtual machine
 /// (measured), which on grid:1000 was over 100 ms of a 1.2 s build. At most
-/// [`Spare::new`]'s `keep` arrays of a kind are kept (one per build running at once); they hold no
-/// more than the builds that made them used at their peak.
+/// [`Spare::new`]'s `keep` arrays of a kind are kept (one per build running at once). The
+/// price: a part's references stay allocated through its tile stage instead of being freed
+/// before it, 32 bytes per triangle more at the peak (grid:1000 built as one part peaks at
+/// 406 MiB instead of 321), within the [`crate::INCORE_BYTES_PER_TRI`] a part is budgeted.
 pub(crate) struct Spare<T> {
     kept: std::sync::Mutex<Vec<Vec<T>>>,
     keep: usize,
@@ -298,27 +299,28 @@ impl Ctx {
     /// `parallel_above`, below that one [`Flat`] subtree per thread's task.
     fn build(&self, refs: &mut [PrimRef], ext: Extent, start: u32) -> BNode {
         if refs.len() > self.cfg.parallel_above {
-            if let Some(n) = self.split(refs, ext, start, &mut Out::Top) {
-                return n;
-            }
+            return self.split(refs, ext, start, &mut Out::Top).expect("a node at the top");
         }
-        // A leaf at the top is a flat tree of one node too.
         let mut flat = Vec::with_capacity(refs.len());
         self.split(refs, ext, start, &mut Out::Flat(&mut flat));
         BNode::Flat(Flat(flat))
     }
 
     /// Splits `refs` (or makes them a leaf) into `out`. For [`Out::Top`], returns the
-    /// boxed node, or `None` when `refs` make a leaf (for the caller to put in a flat tree);
-    /// for [`Out::Flat`], pushes the subtree in pre-order and returns `None`.
+    /// boxed node (a leaf there is a flat tree of one node); for [`Out::Flat`], pushes the
+    /// subtree in pre-order and returns `None`.
     fn split(&self, refs: &mut [PrimRef], ext: Extent, start: u32, out: &mut Out<'_>) -> Option<BNode> {
         let n = refs.len();
         let bounds = ext.bounds();
         let leaf = |out: &mut Out<'_>| {
-            if let Out::Flat(v) = out {
-                v.push(FNode { bounds, a: start, b: n as u32 | FNode::LEAF });
+            let node = FNode { bounds, a: start, b: n as u32 | FNode::LEAF };
+            match out {
+                Out::Top => Some(BNode::Flat(Flat(vec![node]))),
+                Out::Flat(v) => {
+                    v.push(node);
+                    None
+                }
             }
-            None
         };
         // One block's worth is always a leaf: splitting it costs a traversal step (C_TRAV)
         // plus at least one block test, against the leaf's one block test.

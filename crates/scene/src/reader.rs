@@ -311,22 +311,21 @@ impl Scene {
             TILE_OK => true,
             TILE_CORRUPT => false,
             _ => {
-                let verdict = self.check_tile(t);
-                let to = if verdict.is_ok() { TILE_OK } else { TILE_CORRUPT };
-                // The first thread to decide counts the tile (others checked it alike).
-                if state.compare_exchange(TILE_UNCHECKED, to, Ordering::Release, Ordering::Relaxed).is_ok()
-                    && to == TILE_OK
-                {
-                    self.tiles_ok.fetch_add(1, Ordering::Release);
-                }
-                match verdict {
+                let ok = match self.check_tile(t) {
                     Ok(()) => true,
                     Err(e) => {
-                        let mut slot = self.first_error.lock().unwrap_or_else(|p| p.into_inner());
-                        slot.get_or_insert(e);
+                        // Recorded before the state says so: whoever sees the tile corrupt
+                        // finds a fault recorded.
+                        self.first_error.lock().unwrap_or_else(|p| p.into_inner()).get_or_insert(e);
                         false
                     }
+                };
+                let to = if ok { TILE_OK } else { TILE_CORRUPT };
+                // The first thread to decide counts the tile (others checked it alike).
+                if state.compare_exchange(TILE_UNCHECKED, to, Ordering::Release, Ordering::Relaxed).is_ok() && ok {
+                    self.tiles_ok.fetch_add(1, Ordering::Release);
                 }
+                ok
             }
         }
     }
@@ -339,9 +338,9 @@ impl Scene {
         self.tiles_ok.load(Ordering::Acquire) == self.header.tile_count
     }
 
-    /// Checks every tile not checked yet (reads the whole file, as [`Scene::verify_all`];
-    /// faults are recorded as traversal records them, [`Scene::first_error`]) and says
-    /// whether all are sound ([`Scene::all_tiles_checked`]). For scenes that fit in memory
+    /// Checks every tile not checked yet (reads the whole file; faults are recorded as
+    /// traversal records them, [`Scene::first_error`]) and says whether all are sound
+    /// ([`Scene::all_tiles_checked`]). For scenes that fit in memory
     /// and are traced unpaged, such as the benchmark's: their tracers then trace faster.
     pub fn check_all_tiles(&self) -> bool {
         for t in 0..self.header.tile_count {
@@ -493,12 +492,13 @@ impl Scene {
         Ok(())
     }
 
-    /// Checks every tile (reads the whole file). Returns the first fault.
+    /// Checks every tile (reads the whole file, [`Scene::check_all_tiles`]). Returns the
+    /// first fault.
     pub fn verify_all(&self) -> Result<(), SceneError> {
-        for t in 0..self.header.tile_count {
-            self.check_tile(t)?;
+        match self.check_all_tiles() {
+            true => Ok(()),
+            false => Err(self.first_error().expect("a tile found unsound records its fault")),
         }
-        Ok(())
     }
 
     /// The first fault met in a tile since opening, if any. Renderers check this after a

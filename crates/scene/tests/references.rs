@@ -17,6 +17,13 @@ fn block(x: f32) -> Tri4 {
     b
 }
 
+/// [`write_scene`] as `good.mray` in `dir`.
+fn good_scene(dir: &Path) -> std::path::PathBuf {
+    let good = dir.join("good.mray");
+    write_scene(&good);
+    good
+}
+
 /// One part of two tiles: tile 0 holds the root (a leaf of one triangle and a link to tile
 /// 1) and an inner node below it (a leaf of its own); tile 1 holds one node with a leaf.
 fn write_scene(path: &Path) {
@@ -98,8 +105,7 @@ fn patched_copy(good: &Path, name: &str, tile: Option<usize>, node: usize, slot:
 #[test]
 fn out_of_range_references_are_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let good = dir.path().join("good.mray");
-    write_scene(&good);
+    let good = good_scene(dir.path());
     let scene = Scene::open(&good).unwrap();
     scene.verify_all().unwrap();
     let t = scene.tiles();
@@ -139,8 +145,7 @@ fn out_of_range_references_are_refused() {
 #[test]
 fn the_top_level_tree_links_only_to_part_roots() {
     let dir = tempfile::tempdir().unwrap();
-    let good = dir.path().join("good.mray");
-    write_scene(&good);
+    let good = good_scene(dir.path());
     let scene = Scene::open(&good).unwrap();
     let t = scene.tiles();
     let (node0, node1, unit0) = (t[0].node0(), t[1].node0(), t[0].unit0());
@@ -164,8 +169,7 @@ fn the_top_level_tree_links_only_to_part_roots() {
 #[test]
 fn all_tiles_checked_counts_sound_tiles_only() {
     let dir = tempfile::tempdir().unwrap();
-    let good = dir.path().join("good.mray");
-    write_scene(&good);
+    let good = good_scene(dir.path());
     let scene = Scene::open(&good).unwrap();
     assert!(!scene.all_tiles_checked(), "tiles are checked on first use, not at open");
     assert!(scene.tile_usable(1));
