@@ -39,6 +39,7 @@ use std::str::FromStr;
 use std::time::Instant;
 
 use megaray_base::{Progress, TriVerts, Vec3};
+use megaray_build::Quality;
 use megaray_render::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 use megaray_trace::{Hit, Tracer};
 use rayon::ThreadPool;
@@ -53,8 +54,12 @@ use rays::{pixel_ray, Primary, Secondary, SEC_CHUNK};
 /// What is measured.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Kind {
-    /// The in-core builder ([`megaray_build::build_in_core`]); pairs with the peer's `build_medium`.
+    /// The in-core builder ([`megaray_build::build_in_core`]) at [`Quality::Medium`]; pairs
+    /// with the peer's `build_medium`.
     Build,
+    /// The in-core builder at [`Quality::High`], the quality of the trees that are traced
+    /// (as the peer traces its `HIGH` builds); pairs with the peer's `build_high`.
+    BuildHigh,
     /// One primary ray at a time ([`Tracer::intersect`]).
     Primary1,
     /// 8x1 pixel packets ([`Tracer::intersect_packet`]).
@@ -69,15 +74,21 @@ pub enum Kind {
 
 impl Kind {
     /// Every kind, in the order they are measured.
-    pub const ALL: [Kind; 6] =
-        [Kind::Build, Kind::Primary1, Kind::Primary8, Kind::Primary16, Kind::Shadow1, Kind::Diffuse1];
+    pub const ALL: [Kind; 7] =
+        [Kind::Build, Kind::BuildHigh, Kind::Primary1, Kind::Primary8, Kind::Primary16, Kind::Shadow1, Kind::Diffuse1];
     /// The kinds measured when none are named.
-    pub const DEFAULT: &'static str = "primary_1,primary_16,shadow_1,diffuse_1,build";
+    pub const DEFAULT: &'static str = "primary_1,primary_16,shadow_1,diffuse_1,build,build_high";
+
+    /// Whether this kind times the builder (rather than tracing).
+    pub fn is_build(self) -> bool {
+        matches!(self, Kind::Build | Kind::BuildHigh)
+    }
 
     /// The name in the output lines (and on the command line).
     pub fn name(self) -> &'static str {
         match self {
             Kind::Build => "build",
+            Kind::BuildHigh => "build_high",
             Kind::Primary1 => "primary_1",
             Kind::Primary8 => "primary_8",
             Kind::Primary16 => "primary_16",
@@ -247,16 +258,21 @@ pub fn run(
     opts.check()?;
     let name = opts.scene_name(loaded);
     let want = |k: Kind| opts.kinds.contains(&k);
-    if want(Kind::Build) {
+    if want(Kind::Build) || want(Kind::BuildHigh) {
         let t0 = Instant::now();
         let tris = loaded.triangles(progress)?;
         progress.finish();
         on(Event::Info(format!("{} triangles in memory for build ({:.1} s)", tris.len(), t0.elapsed().as_secs_f64())));
+        // The peer's order: at each thread count, the high-quality build, then the medium one.
         for &t in &opts.threads {
-            on(Event::Line(Record::Build(bench_build(&name, &tris, t, opts.reps)?)));
+            for (kind, quality) in [(Kind::BuildHigh, Quality::High), (Kind::Build, Quality::Medium)] {
+                if want(kind) {
+                    on(Event::Line(Record::Build(bench_build(&name, &tris, t, opts.reps, quality)?)));
+                }
+            }
         }
     }
-    if opts.kinds.iter().any(|&k| k != Kind::Build) {
+    if opts.kinds.iter().any(|k| !k.is_build()) {
         bench_trace(loaded, opts, &name, on)?;
     }
     match loaded.scene.first_error() {
@@ -268,16 +284,22 @@ pub fn run(
 /// Tile target of the timed in-core builds (the builder's default).
 const BUILD_TILE_TARGET: u32 = 256 << 10;
 
-/// Times the in-core builder on `threads` threads: one warm-up build, then the median of up to
-/// 3 (`reps` capped to 3), as the peer times `rtcCommitScene`.
-pub fn bench_build(scene: &str, tris: &[TriVerts], threads: usize, reps: u32) -> Result<BuildLine, BenchError> {
+/// Times the in-core builder at `quality` on `threads` threads: one warm-up build, then the
+/// median of up to 3 (`reps` capped to 3), as the peer times `rtcCommitScene`.
+pub fn bench_build(
+    scene: &str,
+    tris: &[TriVerts],
+    threads: usize,
+    reps: u32,
+    quality: Quality,
+) -> Result<BuildLine, BenchError> {
     // The in-core builder recurses once per tree level: big stacks, as `build_scene` gives it.
     let pool = pool(threads, Some(256 << 20))?;
     let breps = reps.clamp(1, 3);
     let (mut ts, mut cpus) = (Vec::new(), Vec::new());
     for r in 0..=breps {
         let (t0, c0) = (Instant::now(), measure::cpu_seconds());
-        let built = pool.install(|| megaray_build::build_in_core(tris, BUILD_TILE_TARGET, true));
+        let built = pool.install(|| megaray_build::build_in_core(tris, BUILD_TILE_TARGET, true, quality));
         let s = t0.elapsed().as_secs_f64();
         let cpu = (measure::cpu_seconds() - c0) / s.max(1e-9);
         megaray_build::recycle_part(built.0);
@@ -293,6 +315,10 @@ pub fn bench_build(scene: &str, tris: &[TriVerts], threads: usize, reps: u32) ->
     Ok(BuildLine {
         scene: scene.to_string(),
         tris: tris.len() as u64,
+        kind: match quality {
+            Quality::Medium => Kind::Build,
+            Quality::High => Kind::BuildHigh,
+        },
         threads,
         build_ms: med * 1e3,
         build_ms_best: best * 1e3,
@@ -346,7 +372,7 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
     let (reps, min_s) = (opts.reps, opts.min_ms * 1e-3);
     for &threads in &opts.threads {
         let pool = pool(threads, None)?;
-        for kind in Kind::ALL.into_iter().filter(|k| *k != Kind::Build && opts.kinds.contains(k)) {
+        for kind in Kind::ALL.into_iter().filter(|k| !k.is_build() && opts.kinds.contains(k)) {
             let secondary = matches!(kind, Kind::Shadow1 | Kind::Diffuse1);
             if secondary && nsec == 0 {
                 on(Event::Info(format!("{kind}: no primary hits, so no rays: skipped")));
@@ -392,7 +418,7 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
                     }
                     a
                 }),
-                Kind::Build => unreachable!("filtered out above"),
+                Kind::Build | Kind::BuildHigh => unreachable!("filtered out above"),
             };
             if megaray_trace::stats::ENABLED {
                 // Traversal counters of every pass (warm-up included), per ray traced.

@@ -35,6 +35,8 @@ pub struct TraceLine {
 pub struct BuildLine {
     pub scene: String,
     pub tris: u64,
+    /// [`Kind::Build`] or [`Kind::BuildHigh`].
+    pub kind: Kind,
     pub threads: usize,
     /// Milliseconds, median build.
     pub build_ms: f64,
@@ -94,10 +96,11 @@ impl Record {
                 num(r.sum_t, 6)
             ),
             Record::Build(r) => format!(
-                "{{\"peer\":\"megaray\",\"scene\":{},\"tris\":{},\"kind\":\"build\",\"threads\":{},\"build_ms\":{},\
+                "{{\"peer\":\"megaray\",\"scene\":{},\"tris\":{},\"kind\":\"{}\",\"threads\":{},\"build_ms\":{},\
                  \"build_ms_best\":{},\"mtris_s\":{},\"cpu_util\":{},\"reps\":{}}}",
                 string(&r.scene),
                 r.tris,
+                r.kind.name(),
                 r.threads,
                 num(r.build_ms, 2),
                 num(r.build_ms_best, 2),
@@ -136,7 +139,7 @@ impl Record {
             Record::Build(r) => format!(
                 "{:<28} {:<10} {:>3} {:>14} {:>9.2} {:>9.2} {:>10.2} {:>4.2} {:>5} {:>9} {:>16}",
                 r.scene,
-                "build",
+                r.kind.name(),
                 r.threads,
                 format!("{} tris", r.tris),
                 r.mtris_s,

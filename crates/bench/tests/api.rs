@@ -69,9 +69,18 @@ fn json_lines_have_every_key_in_the_peers_order() {
     let (lines, info) = events(&loaded, &opts).unwrap();
     assert_eq!(lines.len(), Kind::ALL.len() * 2);
     assert!(info.iter().any(|m| m.starts_with("primary hits ")), "{info:?}");
-    // builds first, then the tracing kinds thread count by thread count
-    assert!(matches!(&lines[0], Record::Build(b) if b.threads == 1 && b.tris == 800 && b.reps == 1));
-    assert!(matches!(&lines[1], Record::Build(b) if b.threads == 2));
+    // builds first (as the peer: high, then medium quality, at each thread count), then the
+    // tracing kinds thread count by thread count
+    let builds: Vec<(Kind, usize)> = lines
+        .iter()
+        .take(4)
+        .map(|r| match r {
+            Record::Build(b) => (b.kind, b.threads),
+            Record::Trace(t) => panic!("a trace line ({}) before the builds", t.kind),
+        })
+        .collect();
+    assert_eq!(builds, [(Kind::BuildHigh, 1), (Kind::Build, 1), (Kind::BuildHigh, 2), (Kind::Build, 2)]);
+    assert!(matches!(&lines[0], Record::Build(b) if b.tris == 800 && b.reps == 1));
     for r in &lines {
         let json = r.json();
         assert!(!json.contains('\n'));
@@ -86,6 +95,8 @@ fn json_lines_have_every_key_in_the_peers_order() {
             }
             Record::Build(b) => {
                 assert_keys(&json, &BUILD_KEYS);
+                let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+                assert_eq!(v["kind"], b.kind.name());
                 assert!(b.build_ms > 0.0 && b.mtris_s > 0.0);
             }
         }
@@ -112,7 +123,8 @@ fn unknown_kinds_and_bad_thread_counts_are_errors() {
     assert!(e.contains("bogus") && e.contains("primary_16"), "{e}");
     assert!(Kind::parse_list("").is_err());
     assert_eq!(Kind::parse_list(" build,primary_1,,build").unwrap(), vec![Kind::Build, Kind::Primary1]);
-    assert_eq!(Kind::parse_list(Kind::DEFAULT).unwrap().len(), 5);
+    assert_eq!(Kind::parse_list(Kind::DEFAULT).unwrap().len(), 6);
+    assert_eq!(Kind::parse_list("build_high").unwrap(), vec![Kind::BuildHigh]);
     for bad in ["0", "x", "", "1,,-2", "2000"] {
         assert!(parse_threads(bad).is_err(), "--threads {bad}");
     }

@@ -16,6 +16,21 @@ fn blocks(n: u32) -> f32 {
     n.div_ceil(BLOCK) as f32
 }
 
+/// How hard the builder looks for good splits (as Embree's build qualities: the trees it
+/// traces are its `HIGH` ones, its build time is quoted for `MEDIUM`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Quality {
+    /// Binned SAH with 32 bins on all three axes for nodes of at least 1024 primitives; 16
+    /// bins (from 128) and 8 bins below, on the axis of the longest centroid extent only.
+    Medium,
+    /// Binned SAH on all three axes at every node: 64 bins from 1024 primitives, 32 from 128,
+    /// 16 below. About 25% slower to build than [`Quality::Medium`]; leaves are packed
+    /// fuller and trees trace faster (measured on grid:1000: 64.9 bytes per triangle instead
+    /// of 67.4, 7% fewer triangle blocks and 3% fewer nodes tested per diffuse ray).
+    #[default]
+    High,
+}
+
 /// Builder settings.
 #[derive(Clone, Copy, Debug)]
 pub struct BvhConfig {
@@ -23,6 +38,8 @@ pub struct BvhConfig {
     pub max_leaf: usize,
     /// Build subtrees of more primitives than this in parallel (rayon); `usize::MAX`: never.
     pub parallel_above: usize,
+    /// How splits are searched for.
+    pub quality: Quality,
 }
 
 /// The binary tree while building. Its top (the nodes the build splits in parallel) is
@@ -327,14 +344,17 @@ impl Ctx {
         if n <= 1 || (n <= self.cfg.max_leaf && n as u32 <= BLOCK) {
             return leaf(out);
         }
-        // Binned SAH over all three axes in one pass; fewer bins for small nodes, where the
-        // per-node cost of clearing and sweeping bins would dominate.
-        let (best, nb) = if n >= 1024 {
-            (find_split::<32, 2, false>(refs, &ext, n > self.cfg.parallel_above), 32)
-        } else if n >= 128 {
-            (find_split::<16, 1, true>(refs, &ext, false), 16)
-        } else {
-            (find_split::<8, 1, true>(refs, &ext, false), 8)
+        // Binned SAH over all three axes in one pass (on one axis for small nodes of a
+        // `Medium` build); fewer bins for small nodes, where the per-node cost of clearing
+        // and sweeping bins would dominate.
+        let par = n > self.cfg.parallel_above;
+        let (best, nb) = match (self.cfg.quality, n) {
+            (Quality::Medium, 1024..) => (find_split::<32, 2, false>(refs, &ext, par), 32),
+            (Quality::Medium, 128..) => (find_split::<16, 1, true>(refs, &ext, false), 16),
+            (Quality::Medium, _) => (find_split::<8, 1, true>(refs, &ext, false), 8),
+            (Quality::High, 1024..) => (find_split::<64, 2, false>(refs, &ext, par), 64),
+            (Quality::High, 128..) => (find_split::<32, 1, false>(refs, &ext, false), 32),
+            (Quality::High, _) => (find_split::<16, 1, false>(refs, &ext, false), 16),
         };
         let cmin = ext.clo;
         let scale = bin_scale(&ext, nb);
@@ -711,20 +731,58 @@ mod tests {
         for _ in 0..100 {
             boxes.push(Aabb { min: [0.5; 3], max: [0.5; 3] }); // coincident centroids
         }
-        let b = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 1000 });
-        let mut seen = vec![0u32; boxes.len()];
+        for quality in [Quality::Medium, Quality::High] {
+            let b = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 1000, quality });
+            let mut seen = vec![0u32; boxes.len()];
+            for n in &b.nodes {
+                for (k, kid) in n.kids.iter().enumerate() {
+                    if let Kid::Leaf { start, count } = kid {
+                        for &p in &b.order[*start as usize..(*start + *count) as usize] {
+                            seen[p as usize] += 1;
+                            assert!(n.bounds[k].contains(&boxes[p as usize]));
+                        }
+                        assert!(*count <= 4);
+                    }
+                }
+            }
+            assert!(seen.iter().all(|&c| c == 1), "{quality:?}");
+        }
+    }
+
+    /// The SAH cost of an 8-wide tree as the builder counts it: a traversal step per inner
+    /// node and a block test per four primitives of a leaf, each weighted by its box's area.
+    fn sah_cost(b: &Bvh) -> f64 {
+        let mut cost = b.bounds.half_area() as f64;
         for n in &b.nodes {
             for (k, kid) in n.kids.iter().enumerate() {
-                if let Kid::Leaf { start, count } = kid {
-                    for &p in &b.order[*start as usize..(*start + *count) as usize] {
-                        seen[p as usize] += 1;
-                        assert!(n.bounds[k].contains(&boxes[p as usize]));
-                    }
-                    assert!(*count <= 4);
+                let area = n.bounds[k].half_area() as f64;
+                match kid {
+                    Kid::Inner(_) => cost += area,
+                    Kid::Leaf { count, .. } => cost += area * count.div_ceil(BLOCK) as f64,
+                    Kid::Empty => {}
                 }
             }
         }
-        assert!(seen.iter().all(|&c| c == 1));
+        cost / b.bounds.half_area() as f64
+    }
+
+    /// A high-quality build finds a better tree than a medium one (here: thin boxes at
+    /// random, many of them overlapping) and packs its leaves at least as full.
+    #[test]
+    fn high_quality_builds_better_trees() {
+        let mut boxes = Vec::new();
+        let mut s = 3u64;
+        for _ in 0..30_000 {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            let (x, y, z) = ((s >> 40) as f32 / 16777216.0, (s >> 20 & 0xfffff) as f32 / 1048576.0, (s & 0xfff) as f32);
+            let long = (s >> 12 & 0xff) as f32 / 2560.0;
+            boxes.push(Aabb { min: [x, y, z / 4096.0], max: [x + long, y + 0.002, z / 4096.0 + 0.001] });
+        }
+        let build = |quality| build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX, quality });
+        let (medium, high) = (build(Quality::Medium), build(Quality::High));
+        let leaves = |b: &Bvh| b.nodes.iter().flat_map(|n| n.kids).filter(|k| matches!(k, Kid::Leaf { .. })).count();
+        assert!(sah_cost(&high) < sah_cost(&medium), "high {} medium {}", sah_cost(&high), sah_cost(&medium));
+        assert!(leaves(&high) <= leaves(&medium), "high {} leaves, medium {}", leaves(&high), leaves(&medium));
     }
 
     /// Trees of a few primitives (a lone leaf at the root, boxed nodes over flat subtrees of
@@ -735,8 +793,9 @@ mod tests {
             let boxes: Vec<Aabb> = (0..n)
                 .map(|i| Aabb { min: [i as f32, 0.0, (i % 3) as f32], max: [i as f32 + 0.5, 1.0, 1.0] })
                 .collect();
-            let serial = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX });
-            let par = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 2 });
+            let quality = Quality::High;
+            let serial = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX, quality });
+            let par = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 2, quality });
             assert_eq!(serial.order, par.order, "{n} primitives");
             assert_eq!(serial.depth, par.depth, "{n} primitives");
             assert_eq!(serial.nodes.len(), par.nodes.len(), "{n} primitives");
@@ -767,15 +826,17 @@ mod tests {
             let (x, y, z) = ((s >> 40) as f32 / 16777216.0, (s >> 20 & 0xfffff) as f32 / 1048576.0, (s & 0xff) as f32);
             boxes.push(Aabb { min: [x, y, z * 0.01], max: [x + 0.003, y + 0.002, z * 0.01 + 0.001] });
         }
-        let serial = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX });
         let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
-        let par = pool.install(|| build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 500 }));
-        assert_eq!(serial.order, par.order);
-        assert_eq!(serial.depth, par.depth);
-        assert_eq!(serial.nodes.len(), par.nodes.len());
-        for (a, b) in serial.nodes.iter().zip(&par.nodes) {
-            assert_eq!(a.kids, b.kids);
-            assert_eq!(a.bounds, b.bounds);
+        for quality in [Quality::Medium, Quality::High] {
+            let serial = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX, quality });
+            let par = pool.install(|| build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 500, quality }));
+            assert_eq!(serial.order, par.order);
+            assert_eq!(serial.depth, par.depth);
+            assert_eq!(serial.nodes.len(), par.nodes.len());
+            for (a, b) in serial.nodes.iter().zip(&par.nodes) {
+                assert_eq!(a.kids, b.kids);
+                assert_eq!(a.bounds, b.bounds);
+            }
         }
     }
 }

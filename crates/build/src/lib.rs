@@ -45,6 +45,7 @@ use megaray_base::{Aabb, Progress};
 use megaray_scene::format::{Node8, PackedNormals, NODE_WIDTH};
 use megaray_scene::{BlobRef, PartBlob, SceneWriter};
 
+pub use crate::bvh::Quality;
 use crate::bvh::{build_bvh, build_bvh_of, BvhConfig, Kid};
 use crate::stream::{StreamFile, StreamReader, StreamTri};
 
@@ -69,6 +70,9 @@ pub struct BuildOptions {
     pub split_fanout: usize,
     /// Memory the readers may use for vertex tables (part of `build_mem`).
     pub import_mem: Option<u64>,
+    /// How hard each part's builder looks for good splits (the top-level tree over the parts
+    /// is always built at [`Quality::High`]: it is small).
+    pub quality: Quality,
     /// Set it from another thread (a Ctrl-C handler) to stop the build; it then returns
     /// [`BuildError::Cancelled`] and removes its temporary files.
     pub cancel: Arc<AtomicBool>,
@@ -83,6 +87,7 @@ impl Default for BuildOptions {
             max_part_tris: None,
             split_fanout: 256,
             import_mem: None,
+            quality: Quality::High,
             cancel: Arc::new(AtomicBool::new(false)),
         }
     }
@@ -275,7 +280,7 @@ pub fn build_scene(
 
 /// The top-level tree over part boxes, in file layout; returns nodes and depth.
 pub fn top_level(boxes: &[Aabb]) -> (Vec<Node8>, u32) {
-    let bvh = build_bvh(boxes, BvhConfig { max_leaf: 1, parallel_above: usize::MAX });
+    let bvh = build_bvh(boxes, BvhConfig { max_leaf: 1, parallel_above: usize::MAX, quality: Quality::High });
     let nodes = bvh
         .nodes
         .iter()
@@ -335,7 +340,7 @@ fn build_part(
     let ids: Vec<u64> = recs.iter().map(|t| t.id).collect();
     let tris: Vec<[[f32; 3]; 3]> = recs.iter().map(|t| t.v).collect();
     drop(recs);
-    let (mut blob, tri_source) = build_in_core(&tris, opts.tile_target, parallel);
+    let (mut blob, tri_source) = build_in_core(&tris, opts.tile_target, parallel, opts.quality);
     drop(tris);
     // Attributes per slot; padding lanes repeat the id of the block's first triangle.
     let mut last = 0;
@@ -359,8 +364,13 @@ fn build_part(
 /// about `tile_target` bytes (no attributes). Also returns, for each triangle slot in file
 /// order (4 per block), the index in `tris` of its triangle or [`tiles::PADDING`]. This is
 /// the in-core builder that `megaray bench` times.
-pub fn build_in_core(tris: &[[[f32; 3]; 3]], tile_target: u32, parallel: bool) -> (PartBlob, Vec<u32>) {
-    let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX } };
+pub fn build_in_core(
+    tris: &[[[f32; 3]; 3]],
+    tile_target: u32,
+    parallel: bool,
+    quality: Quality,
+) -> (PartBlob, Vec<u32>) {
+    let cfg = BvhConfig { max_leaf: 4, parallel_above: if parallel { 4096 } else { usize::MAX }, quality };
     let bvh = build_bvh_of(tris.len(), |i| Aabb::from_points(&tris[i]), cfg);
     let tiled = tiles::tile_part(&bvh, tris, tile_target as u64);
     let blob = PartBlob {
@@ -400,14 +410,14 @@ mod tests {
                 .collect()
         };
         let (big, small) = (model(60_000), model(7_000));
-        let fresh_big = build_in_core(&big, 16 << 10, true);
-        let fresh_small = build_in_core(&small, 16 << 10, true);
+        let fresh_big = build_in_core(&big, 16 << 10, true, Quality::High);
+        let fresh_small = build_in_core(&small, 16 << 10, true, Quality::High);
         let want = [(bytes(&fresh_big.0), fresh_big.1.clone()), (bytes(&fresh_small.0), fresh_small.1.clone())];
         recycle_part(fresh_big.0);
         recycle_part(fresh_small.0);
         for round in 0..2 {
             for (k, tris) in [&small, &big].into_iter().enumerate() {
-                let (blob, src) = build_in_core(tris, 16 << 10, round == 0);
+                let (blob, src) = build_in_core(tris, 16 << 10, round == 0, Quality::High);
                 let w = &want[1 - k];
                 assert!(bytes(&blob) == w.0 && src == w.1, "round {round}, model {k}: differs from a fresh build");
                 recycle_part(blob);

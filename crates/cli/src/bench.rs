@@ -21,7 +21,10 @@ pub struct BenchArgs {
     /// temporary scene first) or a gen spec (grid:1000, sphereflake:4, plant:1M).
     #[arg(value_name = "SCENE")]
     scene: String,
-    /// Comma-separated kinds: primary_1, primary_8, primary_16, shadow_1, diffuse_1, build.
+    /// Comma-separated kinds: primary_1, primary_8, primary_16, shadow_1, diffuse_1, build
+    /// (the in-core builder at medium quality, held against the peer's build_medium) and
+    /// build_high (at high quality, the quality of the scenes that are traced, against the
+    /// peer's build_high).
     #[arg(long, value_name = "K,K,..", default_value = Kind::DEFAULT)]
     kinds: String,
     /// Comma-separated thread counts, one figure each.

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use megaray_base::{format_size, parse_size, Progress, Vec3};
-use megaray_build::{build_scene, BuildOptions};
+use megaray_build::{build_scene, BuildOptions, Quality};
 use megaray_gen::GenSpec;
 use megaray_render::{
     read_exr, render_progressive, write_env, Builtin, Camera, EnvMap, Environment, RenderSettings, Renderer, SkySpec,
@@ -97,6 +97,13 @@ pub fn gen(a: GenArgs, bars: &dyn Progress) -> Result<()> {
 }
 
 // ---------------------------------------------------------------------------------------
+/// `megaray build --quality`.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum QualityArg {
+    High,
+    Medium,
+}
+
 #[derive(Args)]
 pub struct BuildArgs {
     /// Model files: .ply, .obj, .stl, .gltf, .glb (merged into one scene), or gen SPECs
@@ -116,6 +123,11 @@ pub struct BuildArgs {
     /// Worker threads (default: all cores).
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
+    /// How hard the builder looks for good splits: `high` (binned SAH on all three axes at
+    /// every node: traces faster) or `medium` (about 25% faster to build, trees a few percent
+    /// slower to trace).
+    #[arg(long, value_enum, default_value = "high")]
+    quality: QualityArg,
     /// Print the build summary as one JSON object.
     #[arg(long)]
     json: bool,
@@ -176,6 +188,10 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
         build_mem: a.build_mem,
         threads: a.threads.unwrap_or(BuildOptions::default().threads).max(1),
         tile_target: a.tile_size as u32,
+        quality: match a.quality {
+            QualityArg::High => Quality::High,
+            QualityArg::Medium => Quality::Medium,
+        },
         ..BuildOptions::default()
     };
     let cancel = opts.cancel.clone();
@@ -195,6 +211,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
                 "import_s": s.import_s, "split_s": s.split_s, "parts_s": s.parts_s, "total_s": s.total_s,
                 "mtris_s": s.triangles as f64 / s.total_s / 1e6,
                 "build_mem": a.build_mem, "peak_rss": megaray_base::peak_rss(),
+                "quality": match a.quality { QualityArg::High => "high", QualityArg::Medium => "medium" },
             })
         );
     } else {
@@ -771,6 +788,7 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
                 build_mem: a.build_mem,
                 tile_size: 256 << 10,
                 threads: None,
+                quality: QualityArg::High,
                 json: false,
             },
             bars,
