@@ -25,6 +25,21 @@ pub use progress::{NoProgress, Progress};
 pub use ray::{intersect_triangle, Ray, TriHit, WatertightRay};
 pub use size::{format_size, parse_size};
 
+/// Starts loading the cache line that holds `x` (a hint: it never faults and changes nothing
+/// the program can see; a no-op off x86-64). For passes that gather from big arrays in an
+/// order known ahead, so that their misses overlap instead of queueing.
+#[inline(always)]
+pub fn prefetch<T>(x: &T) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: a prefetch is a hint with no architectural effect: it never faults, whatever
+    // the address (here a valid reference), and reads nothing into the program.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((x as *const T).cast::<i8>())
+    };
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = x;
+}
+
 /// The lowbias32 integer hash: deterministic per-pixel random numbers (the Embree peer
 /// harness uses the same one, so ray sets can be compared).
 #[inline]

@@ -45,6 +45,10 @@ pub struct Tiled {
 /// The `tri_source` of a padding lane.
 pub const PADDING: u32 = u32::MAX;
 
+/// How many primitives ahead (in the BVH's primitive order) the emission of a leaf asks for
+/// the triangles it will need.
+const PREFETCH_AHEAD: usize = 32;
+
 /// Bytes of a leaf of `count` triangles.
 fn leaf_bytes(count: u32) -> u64 {
     144 * count.div_ceil(4) as u64
@@ -148,6 +152,13 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
                     Kid::Leaf { start, count } => {
                         let first = blob.blocks.len() as u32;
                         let prims = &bvh.order[start as usize..(start + count) as usize];
+                        // The triangles of the leaves that come next (they mostly follow in
+                        // `order`) start loading now: they lie all over `tris` (in input
+                        // order), and fetching them one miss at a time was most of this pass
+                        // (grid:1000: 100 ms of a 1.2 s build on 1 thread).
+                        for &p in bvh.order.iter().skip(start as usize + PREFETCH_AHEAD).take(count as usize) {
+                            megaray_base::prefetch(&tris[p as usize]);
+                        }
                         for chunk in prims.chunks(4) {
                             let mut b = Tri4 { v: [[0.0; 4]; 9] };
                             for lane in 0..4 {
