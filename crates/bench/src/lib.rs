@@ -84,6 +84,14 @@ impl Kind {
         matches!(self, Kind::Build | Kind::BuildHigh)
     }
 
+    /// The kind that times the builder at `quality`.
+    pub fn build(quality: Quality) -> Kind {
+        match quality {
+            Quality::Medium => Kind::Build,
+            Quality::High => Kind::BuildHigh,
+        }
+    }
+
     /// The name in the output lines (and on the command line).
     pub fn name(self) -> &'static str {
         match self {
@@ -265,8 +273,8 @@ pub fn run(
         on(Event::Info(format!("{} triangles in memory for build ({:.1} s)", tris.len(), t0.elapsed().as_secs_f64())));
         // The peer's order: at each thread count, the high-quality build, then the medium one.
         for &t in &opts.threads {
-            for (kind, quality) in [(Kind::BuildHigh, Quality::High), (Kind::Build, Quality::Medium)] {
-                if want(kind) {
+            for quality in [Quality::High, Quality::Medium] {
+                if want(Kind::build(quality)) {
                     on(Event::Line(Record::Build(bench_build(&name, &tris, t, opts.reps, quality)?)));
                 }
             }
@@ -315,10 +323,7 @@ pub fn bench_build(
     Ok(BuildLine {
         scene: scene.to_string(),
         tris: tris.len() as u64,
-        kind: match quality {
-            Quality::Medium => Kind::Build,
-            Quality::High => Kind::BuildHigh,
-        },
+        kind: Kind::build(quality),
         threads,
         build_ms: med * 1e3,
         build_ms_best: best * 1e3,

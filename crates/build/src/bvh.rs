@@ -718,16 +718,40 @@ fn fill_serial(node: BRef<'_>, out: &mut [NodeB], at: &mut usize, base: u32) -> 
 mod tests {
     use super::*;
 
+    /// `n` boxes made by `f` from the successive states of a linear congruential generator
+    /// started at `seed` (deterministic test inputs).
+    fn random_boxes(seed: u64, n: usize, f: impl Fn(u64) -> Aabb) -> Vec<Aabb> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                f(s)
+            })
+            .collect()
+    }
+
+    /// `s`'s high bits as three coordinates: two in `[0, 1)` and a third, `s & mask`.
+    fn coords(s: u64, mask: u64) -> (f32, f32, f32) {
+        ((s >> 40) as f32 / 16777216.0, (s >> 20 & 0xfffff) as f32 / 1048576.0, (s & mask) as f32)
+    }
+
+    /// The serial and parallel builds of the same input made the same tree.
+    fn assert_same_tree(serial: &Bvh, par: &Bvh, what: &str) {
+        assert_eq!(serial.order, par.order, "{what}");
+        assert_eq!(serial.depth, par.depth, "{what}");
+        assert_eq!(serial.nodes.len(), par.nodes.len(), "{what}");
+        for (a, b) in serial.nodes.iter().zip(&par.nodes) {
+            assert_eq!(a.kids, b.kids, "{what}");
+            assert_eq!(a.bounds, b.bounds, "{what}");
+        }
+    }
+
     #[test]
     fn every_primitive_in_exactly_one_leaf() {
-        let mut boxes = Vec::new();
-        let mut s = 1u64;
-        for _ in 0..5000 {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let x = (s >> 40) as f32 / 16777216.0;
-            let y = (s >> 20 & 0xfffff) as f32 / 1048576.0;
-            boxes.push(Aabb { min: [x, y, 0.0], max: [x + 0.01, y + 0.01, 0.01] });
-        }
+        let mut boxes = random_boxes(1, 5000, |s| {
+            let (x, y, _) = coords(s, 0);
+            Aabb { min: [x, y, 0.0], max: [x + 0.01, y + 0.01, 0.01] }
+        });
         for _ in 0..100 {
             boxes.push(Aabb { min: [0.5; 3], max: [0.5; 3] }); // coincident centroids
         }
@@ -770,14 +794,11 @@ mod tests {
     /// random, many of them overlapping) and packs its leaves at least as full.
     #[test]
     fn high_quality_builds_better_trees() {
-        let mut boxes = Vec::new();
-        let mut s = 3u64;
-        for _ in 0..30_000 {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let (x, y, z) = ((s >> 40) as f32 / 16777216.0, (s >> 20 & 0xfffff) as f32 / 1048576.0, (s & 0xfff) as f32);
+        let boxes = random_boxes(3, 30_000, |s| {
+            let (x, y, z) = coords(s, 0xfff);
             let long = (s >> 12 & 0xff) as f32 / 2560.0;
-            boxes.push(Aabb { min: [x, y, z / 4096.0], max: [x + long, y + 0.002, z / 4096.0 + 0.001] });
-        }
+            Aabb { min: [x, y, z / 4096.0], max: [x + long, y + 0.002, z / 4096.0 + 0.001] }
+        });
         let build = |quality| build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX, quality });
         let (medium, high) = (build(Quality::Medium), build(Quality::High));
         let leaves = |b: &Bvh| b.nodes.iter().flat_map(|n| n.kids).filter(|k| matches!(k, Kid::Leaf { .. })).count();
@@ -796,13 +817,9 @@ mod tests {
             let quality = Quality::High;
             let serial = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX, quality });
             let par = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 2, quality });
-            assert_eq!(serial.order, par.order, "{n} primitives");
-            assert_eq!(serial.depth, par.depth, "{n} primitives");
-            assert_eq!(serial.nodes.len(), par.nodes.len(), "{n} primitives");
+            assert_same_tree(&serial, &par, &format!("{n} primitives"));
             let mut seen = vec![0u32; n];
-            for (a, b) in serial.nodes.iter().zip(&par.nodes) {
-                assert_eq!(a.kids, b.kids);
-                assert_eq!(a.bounds, b.bounds);
+            for a in &serial.nodes {
                 for kid in &a.kids {
                     if let Kid::Leaf { start, count } = kid {
                         for &p in &serial.order[*start as usize..(*start + *count) as usize] {
@@ -819,24 +836,15 @@ mod tests {
     /// the tree of the serial one.
     #[test]
     fn parallel_build_equals_serial() {
-        let mut boxes = Vec::new();
-        let mut s = 7u64;
-        for _ in 0..20_000 {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let (x, y, z) = ((s >> 40) as f32 / 16777216.0, (s >> 20 & 0xfffff) as f32 / 1048576.0, (s & 0xff) as f32);
-            boxes.push(Aabb { min: [x, y, z * 0.01], max: [x + 0.003, y + 0.002, z * 0.01 + 0.001] });
-        }
+        let boxes = random_boxes(7, 20_000, |s| {
+            let (x, y, z) = coords(s, 0xff);
+            Aabb { min: [x, y, z * 0.01], max: [x + 0.003, y + 0.002, z * 0.01 + 0.001] }
+        });
         let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
         for quality in [Quality::Medium, Quality::High] {
             let serial = build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX, quality });
             let par = pool.install(|| build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: 500, quality }));
-            assert_eq!(serial.order, par.order);
-            assert_eq!(serial.depth, par.depth);
-            assert_eq!(serial.nodes.len(), par.nodes.len());
-            for (a, b) in serial.nodes.iter().zip(&par.nodes) {
-                assert_eq!(a.kids, b.kids);
-                assert_eq!(a.bounds, b.bounds);
-            }
+            assert_same_tree(&serial, &par, &format!("{quality:?}"));
         }
     }
 }
