@@ -97,6 +97,18 @@ const STACK: usize = 64;
 /// watertight triangle test would find (Ize 2013: 1 + 2 gamma(3)).
 const BOX_EPS: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
+/// The widening of the single-ray kernel's box exits, folded into the reciprocals of its far
+/// planes ([`RayBox::inv_far`]) and into the closest hit it compares them with, so that a
+/// node's test has no multiply after its reductions (the exit's chain is then as long as the
+/// entry's). A far distance `(plane - o) * (inv * FAR_EPS)` takes four roundings (the
+/// difference, the reciprocal, its widening, the product: within a factor `1 - gamma(4)` of
+/// `FAR_EPS` times the exact one), an entry distance three (at most `1 + gamma(3)` over); a
+/// box is kept whenever `FAR_EPS >= (1 + gamma(3)) / (1 - gamma(4))`, about `1 + 7u`
+/// (`u = 2^-24`). This is `1 + 16u`, above [`BOX_EPS`] (`1 + 6u`), which it replaces for
+/// the closest hit as well.
+const FAR_EPS: f32 = 1.0 + 8.0 * f32::EPSILON;
+const _: () = assert!(FAR_EPS > BOX_EPS);
+
 /// A traversal stack entry: something to visit, and the entry distance of its box.
 #[derive(Clone, Copy, Debug)]
 struct Entry {
@@ -137,6 +149,8 @@ const W: usize = NODE_WIDTH;
 struct RayBox {
     org: [f32; 3],
     inv: [f32; 3],
+    /// `inv * FAR_EPS`: the reciprocals the far planes are scaled by ([`FAR_EPS`]).
+    inv_far: [f32; 3],
     /// Byte offsets in a [`Node8`] of the rows ([`Node8::planes`]) of the near planes of x, y
     /// and z, then of the far planes: `32 * row`, the row of a far plane being the other one
     /// of its pair. Always one of 0, 32, .., 160 (the AVX test reads through them unchecked).
@@ -151,8 +165,9 @@ impl RayBox {
         // lane as `divss` would).
         let d = Vec3A::from(r.dir);
         let fixed = d.abs().max(Vec3A::splat(1e-20)).copysign(d);
-        let inv = (Vec3A::ONE / fixed).to_array();
-        RayBox { org: r.org.into(), inv, rows: RayBox::rows(RayBox::octant(r)) }
+        let inv = Vec3A::ONE / fixed;
+        let inv_far = (inv * FAR_EPS).to_array();
+        RayBox { org: r.org.into(), inv: inv.to_array(), inv_far, rows: RayBox::rows(RayBox::octant(r)) }
     }
 
     /// The ray's octant: bit `k` set when the direction's component `k` is negative (its
@@ -218,7 +233,8 @@ impl RayBox {
     }
 
     /// Entry distances of the eight slots and a bit mask of the slots the ray enters
-    /// within `[t0, t1]`; with `AVX`, by [`RayBox::test_avx2`] (which the caller must only
+    /// within `[t0, t1]`, `t1` widened by the caller (the closest hit times [`FAR_EPS`]) as
+    /// the exits are here; with `AVX`, by [`RayBox::test_avx2`] (which the caller must only
     /// ask for in code compiled for AVX2).
     #[inline(always)]
     fn test<const AVX: bool>(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
@@ -245,11 +261,14 @@ impl RayBox {
         // only by `RayBox::new`).
         let ld = |k: usize, far: usize| unsafe { _mm256_loadu_ps(base.add(self.rows[3 * far + k]).cast::<f32>()) };
         let o = self.org.map(|x| _mm256_set1_ps(x));
-        let ninv = self.inv.map(|x| _mm256_set1_ps(-x));
-        let q = |k: usize, far: usize| _mm256_mul_ps(_mm256_sub_ps(o[k], ld(k, far)), ninv[k]);
-        let tn = _mm256_max_ps(_mm256_max_ps(_mm256_max_ps(q(0, 0), q(1, 0)), q(2, 0)), _mm256_set1_ps(t0));
-        let tf = _mm256_min_ps(_mm256_min_ps(_mm256_min_ps(q(0, 1), q(1, 1)), q(2, 1)), _mm256_set1_ps(t1));
-        let tf = _mm256_mul_ps(tf, _mm256_set1_ps(BOX_EPS));
+        let ninv = [self.inv.map(|x| _mm256_set1_ps(-x)), self.inv_far.map(|x| _mm256_set1_ps(-x))];
+        let q = |k: usize, far: usize| _mm256_mul_ps(_mm256_sub_ps(o[k], ld(k, far)), ninv[far][k]);
+        // Reduced as trees of two levels, not chains of three: a node's test is on the
+        // traversal's critical path (no NaN arises, so the order of `max` and `min` changes
+        // nothing but the sign of a zero, which no comparison sees).
+        let tn = _mm256_max_ps(_mm256_max_ps(q(0, 0), q(1, 0)), _mm256_max_ps(q(2, 0), _mm256_set1_ps(t0)));
+        // Exits come widened ([`FAR_EPS`]): no multiply after the reduction.
+        let tf = _mm256_min_ps(_mm256_min_ps(q(0, 1), q(1, 1)), _mm256_min_ps(q(2, 1), _mm256_set1_ps(t1)));
         let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
         let mut near = [0f32; W];
         // SAFETY: `near` has room for eight f32s.
@@ -266,15 +285,16 @@ impl RayBox {
         let (nx, ny, nz) = (row(0, 0), row(1, 0), row(2, 0));
         let (fx, fy, fz) = (row(0, 1), row(1, 1), row(2, 1));
         let o = self.org.map(Vec4::splat);
-        let inv = self.inv.map(Vec4::splat);
+        let inv = [self.inv.map(Vec4::splat), self.inv_far.map(Vec4::splat)];
         let (t0, t1) = (Vec4::splat(t0), Vec4::splat(t1));
         // Slots 0..4, then 4..8: one 4-wide half at a time.
         let half = |h: usize| {
-            let q = |r: &[f32; W], k: usize| (Vec4::from_slice(&r[4 * h..4 * h + 4]) - o[k]) * inv[k];
-            let tn = q(nx, 0).max(q(ny, 1)).max(q(nz, 2)).max(t0);
-            // Both the box's exit and the current closest hit are widened: a box's entry
-            // distance may round up past the distance of a hit inside it.
-            let tf = q(fx, 0).min(q(fy, 1)).min(q(fz, 2)).min(t1) * BOX_EPS;
+            let q = |r: &[f32; W], k: usize, far: usize| (Vec4::from_slice(&r[4 * h..4 * h + 4]) - o[k]) * inv[far][k];
+            let tn = q(nx, 0, 0).max(q(ny, 1, 0)).max(q(nz, 2, 0).max(t0));
+            // Both the box's exit and the current closest hit are widened ([`FAR_EPS`]: the
+            // exits by their reciprocals, the hit by the caller): a box's entry distance
+            // may round up past the distance of a hit inside it.
+            let tf = q(fx, 0, 1).min(q(fy, 1, 1)).min(q(fz, 2, 1).min(t1));
             (tn, tn.cmple(tf).bitmask())
         };
         let (n0, m0) = half(0);
@@ -1214,6 +1234,9 @@ impl<'s> Tracer<'s> {
         let mut c = w.c;
         let mut sp = w.sp;
         let mut t_best = w.t_best;
+        // The closest hit widened as box exits are ([`FAR_EPS`]), for the box tests and for
+        // skipping popped entries beyond it.
+        let mut t_wide = t_best * FAR_EPS;
         let mut next = w.next.take();
         let event = 'walk: loop {
             let e = match next.take() {
@@ -1226,7 +1249,7 @@ impl<'s> Tracer<'s> {
                     let e = w.fixed[sp % STACK];
                     // Beyond the closest hit: skipped. (An any-hit query's `t_best` is the
                     // ray's end until it ends, so its entries are never beyond it.)
-                    if !ANY && e.t > t_best * BOX_EPS {
+                    if !ANY && e.t > t_wide {
                         continue;
                     }
                     e
@@ -1279,6 +1302,7 @@ impl<'s> Tracer<'s> {
                                 Ok(None) => {}
                                 Ok(Some((lane, h))) => {
                                     t_best = h.t;
+                                    t_wide = h.t * FAR_EPS;
                                     w.best = Some(Found::new(h, c, unit, lane));
                                     if ANY {
                                         break 'walk Event::Hit;
@@ -1321,7 +1345,7 @@ impl<'s> Tracer<'s> {
                 let node = &self.nodes[node as usize];
                 let arr = c;
                 stats::count(|s| s.nodes += 1);
-                let (dist, mask) = rb.test::<AVX>(node, t_min, t_best);
+                let (dist, mask) = rb.test::<AVX>(node, t_min, t_wide);
                 if mask == 0 {
                     continue 'walk;
                 }
@@ -1357,25 +1381,27 @@ impl<'s> Tracer<'s> {
                     r = near.r;
                     continue;
                 }
-                // Three or more: sort by entry distance (insertion sort, at most eight).
-                let mut order = [far, near, near, near, near, near, near, near];
-                let mut n = 2;
+                // Three or more: pushed as they come and sorted in place on the stack, far to
+                // near (insertion sort, at most eight: no array of them to fill and copy);
+                // the nearest, on top, is taken off again as the next to visit.
+                push(far);
+                push(near);
+                let base = sp - 2;
                 let mut m = m2;
                 while m != 0 {
                     let x = at(m.trailing_zeros());
                     m &= m - 1;
-                    let mut j = n;
-                    while j > 0 && order[j - 1].t < x.t {
-                        order[j] = order[j - 1];
+                    self.prefetch(x.r);
+                    let mut j = sp;
+                    while j > base && w.fixed[(j - 1) % STACK].t < x.t {
+                        w.fixed[j % STACK] = w.fixed[(j - 1) % STACK];
                         j -= 1;
                     }
-                    order[j] = x;
-                    n += 1;
+                    w.fixed[j % STACK] = x;
+                    sp += 1;
                 }
-                for &x in &order[..n - 1] {
-                    push(x);
-                }
-                r = order[n - 1].r;
+                sp -= 1;
+                r = w.fixed[sp % STACK].r;
             }
         };
         w.c = c;
