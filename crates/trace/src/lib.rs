@@ -458,8 +458,8 @@ impl RayTri4 {
         lanes: u32,
         t_max: f32,
     ) -> Result<Option<(usize, TriHit)>, Exact> {
-        // SAFETY: only instantiated in the AVX kernels (`Tracer::walk` with `AVX`), which
-        // run only on CPUs with AVX2 and FMA (`Tracer::traverse`).
+        // SAFETY: only called in the AVX kernels (`Tracer::walk` with `AVX`), which run only
+        // on CPUs with AVX2 and FMA (`Tracer::traverse`), and by a test that checks first.
         unsafe {
             match self.kz {
                 0 => self.test8_k::<ANY, 1, 2, 0>(sp, b0, b1, lanes, t_max),
@@ -1677,6 +1677,20 @@ mod tests {
         fn v(&mut self) -> Vec3 {
             Vec3::new(self.f(), self.f(), self.f())
         }
+
+        /// `n` random triangles, a ray origin, and targets for rays from it: a random
+        /// point, then every vertex and edge midpoint of the triangles.
+        fn case(&mut self, n: usize) -> (Vec<[[f32; 3]; 3]>, Vec3, Vec<Vec3>) {
+            let tris: Vec<[[f32; 3]; 3]> =
+                (0..n).map(|_| [self.v().into(), self.v().into(), self.v().into()]).collect();
+            let org = self.v() * 3.0;
+            let mut targets = vec![self.v() * 0.5];
+            for t in &tris {
+                let [a, b, c] = t.map(Vec3::from);
+                targets.extend([a, b, c, (a + b) * 0.5, (b + c) * 0.5, (a + c) * 0.5]);
+            }
+            (tris, org, targets)
+        }
     }
 
     /// The 4-wide triangle test gives exactly the scalar reference's hits, on random rays and
@@ -1686,16 +1700,10 @@ mod tests {
         let mut rng = Rng(3);
         let mut checked = 0;
         for _ in 0..2000 {
+            let (tris, org, targets) = rng.case(4);
             let mut b = Tri4 { v: [[0.0; 4]; 9] };
-            let tris: Vec<[[f32; 3]; 3]> = (0..4).map(|_| [rng.v().into(), rng.v().into(), rng.v().into()]).collect();
             for (l, t) in tris.iter().enumerate() {
                 b.set(l, t);
-            }
-            let org = rng.v() * 3.0;
-            let mut targets = vec![rng.v() * 0.5];
-            for t in &tris {
-                let [a, bb, c] = t.map(Vec3::from);
-                targets.extend([a, bb, c, (a + bb) * 0.5, (bb + c) * 0.5, (a + c) * 0.5]);
             }
             for target in targets {
                 let ray = Ray::new(org, target - org);
@@ -1735,16 +1743,10 @@ mod tests {
         let mut rng = Rng(5);
         let (mut checked, mut exact) = (0, 0);
         for _ in 0..1000 {
-            let tris: Vec<[[f32; 3]; 3]> = (0..8).map(|_| [rng.v().into(), rng.v().into(), rng.v().into()]).collect();
+            let (tris, org, targets) = rng.case(8);
             let mut b = [Tri4 { v: [[0.0; 4]; 9] }, Tri4 { v: [[0.0; 4]; 9] }];
             for (l, t) in tris.iter().enumerate() {
                 b[l / 4].set(l % 4, t);
-            }
-            let org = rng.v() * 3.0;
-            let mut targets = vec![rng.v() * 0.5];
-            for t in &tris {
-                let [a, bb, c] = t.map(Vec3::from);
-                targets.extend([a, bb, c, (a + bb) * 0.5, (bb + c) * 0.5, (a + c) * 0.5]);
             }
             for target in targets {
                 let ray = Ray::new(org, target - org);
