@@ -30,14 +30,21 @@ pub use size::{format_size, parse_size};
 /// order known ahead, so that their misses overlap instead of queueing.
 #[inline(always)]
 pub fn prefetch<T>(x: &T) {
+    prefetch_addr((x as *const T).cast::<u8>());
+}
+
+/// [`prefetch`] of whatever cache line holds address `p`, which need not point into
+/// anything the program owns (a traversal computes the addresses of children it may visit).
+#[inline(always)]
+pub fn prefetch_addr(p: *const u8) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch is a hint with no architectural effect: it never faults, whatever
-    // the address (here a valid reference), and reads nothing into the program.
+    // the address, and reads nothing into the program.
     unsafe {
-        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>((x as *const T).cast::<i8>())
+        std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(p.cast::<i8>())
     };
     #[cfg(not(target_arch = "x86_64"))]
-    let _ = x;
+    let _ = p;
 }
 
 /// The lowbias32 integer hash: deterministic per-pixel random numbers (the Embree peer

@@ -849,27 +849,19 @@ impl<'s> Tracer<'s> {
     /// tile's pages are not touched, so a paged tracer never waits for one).
     #[inline(always)]
     fn prefetch(&self, r: u64) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-            let base = self.nodes.as_ptr() as *const u8;
-            // Inner nodes and links (bit 62 clear) by node, leaves by block; parts not.
-            let at = if r & (1 << 62) == 0 {
-                (r & ChildRef::MAX_NODE) as usize * NODE_BYTES
-            } else if (r as i64) >= 0 {
-                (r & ChildRef::MAX_UNIT) as usize * 16
-            } else {
-                return;
-            };
-            let p = base.wrapping_add(at);
-            for line in 0..4 {
-                // SAFETY: a prefetch is a hint with no architectural effect: it never faults,
-                // whatever the address, and reads nothing into the program.
-                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(64 * line) as *const i8) };
-            }
+        let base = self.nodes.as_ptr() as *const u8;
+        // Inner nodes and links (bit 62 clear) by node, leaves by block; parts not.
+        let at = if r & (1 << 62) == 0 {
+            (r & ChildRef::MAX_NODE) as usize * NODE_BYTES
+        } else if (r as i64) >= 0 {
+            (r & ChildRef::MAX_UNIT) as usize * 16
+        } else {
+            return;
+        };
+        let p = base.wrapping_add(at);
+        for line in 0..4 {
+            megaray_base::prefetch_addr(p.wrapping_add(64 * line));
         }
-        #[cfg(not(target_arch = "x86_64"))]
-        let _ = r;
     }
 
     /// The [`Hit`] of what the single-ray kernel found: its part, slot and corners.
@@ -1295,6 +1287,28 @@ impl<'s> Tracer<'s> {
         self.walk::<false, ANY, ALL, { usize::MAX }>(w, ray)
     }
 
+    /// The next blocks of a leaf (`left` triangles from the block at `unit`) against the
+    /// ray: two at once by [`RayTri4::try_test8`] on AVX when two or more remain, else one by
+    /// [`RayTri4::try_test`]. Says how many blocks it tested; a hit's lane counts across them.
+    #[inline(always)]
+    fn test_blocks<const AVX: bool, const ANY: bool>(
+        &self,
+        rt: &RayTri4,
+        sp: &Splats,
+        unit: u64,
+        left: u32,
+        t_max: f32,
+    ) -> (Result<Option<(usize, TriHit)>, Exact>, u32) {
+        #[cfg(target_arch = "x86_64")]
+        if AVX && left > 4 {
+            stats::count(|s| s.blocks += 2);
+            let (b0, b1) = (self.block_at(unit), self.block_at(unit + 9));
+            return (rt.try_test8::<ANY>(sp, b0, b1, lanes8(left), t_max), 2);
+        }
+        stats::count(|s| s.blocks += 1);
+        (rt.try_test(sp, self.block_at(unit), lanes(left), t_max), 1)
+    }
+
     /// The hot loop of the single-ray kernel. Near-first: of the children a node's box test
     /// hits, the nearest is visited next, the others are pushed far to near (unsorted for
     /// `ANY`). Leaves are children like any other, so they too are tested nearest first.
@@ -1405,43 +1419,22 @@ impl<'s> Tracer<'s> {
                         // A leaf: `count` triangles from the block at `unit`.
                         let (mut unit, mut left) = (r & ChildRef::MAX_UNIT, ((r >> 40) & 0xff) as u32);
                         while left > 0 {
-                            #[cfg(target_arch = "x86_64")]
-                            if AVX && left > 4 {
-                                // Two blocks (or more left): the first two at once.
-                                let (b0, b1) = (self.block_at(unit), self.block_at(unit + 9));
-                                stats::count(|s| s.blocks += 2);
-                                match rt.try_test8::<ANY>(&shared, b0, b1, lanes8(left), t_best) {
-                                    Ok(None) => {}
-                                    Ok(Some((lane, h))) => {
-                                        t_best = h.t;
-                                        t_wide = h.t * FAR_EPS;
-                                        w.best = Some(Found::new(h, c, unit + 9 * (lane / 4) as u64, lane % 4));
-                                        if ANY {
-                                            break 'walk Event::Hit;
-                                        }
-                                    }
-                                    Err(Exact) => break 'walk Event::Exact { unit, count: left },
-                                }
-                                left = left.saturating_sub(8);
-                                unit += 18;
-                                continue;
-                            }
-                            let b = self.block_at(unit);
-                            stats::count(|s| s.blocks += 1);
-                            match rt.try_test(&shared, b, lanes(left), t_best) {
+                            let (found, blocks) = self.test_blocks::<AVX, ANY>(&rt, &shared, unit, left, t_best);
+                            match found {
                                 Ok(None) => {}
                                 Ok(Some((lane, h))) => {
                                     t_best = h.t;
                                     t_wide = h.t * FAR_EPS;
-                                    w.best = Some(Found::new(h, c, unit, lane));
+                                    // Lanes 4..8 are the second block's.
+                                    w.best = Some(Found::new(h, c, unit + 9 * (lane / 4) as u64, lane % 4));
                                     if ANY {
                                         break 'walk Event::Hit;
                                     }
                                 }
                                 Err(Exact) => break 'walk Event::Exact { unit, count: left },
                             }
-                            left = left.saturating_sub(4);
-                            unit += 9;
+                            left = left.saturating_sub(4 * blocks);
+                            unit += 9 * blocks as u64;
                         }
                         continue 'walk;
                     }
