@@ -228,15 +228,11 @@ struct PacketTri {
     t_min: [f32; WIDTH],
 }
 
-/// One triangle against the 16 rays of a packet: which rays hit it before their `t_max`
-/// (`ok`), which must take the reference's double-precision path (`exact`: an edge function
-/// is exactly zero), and the distances and barycentrics.
-struct Hits16 {
-    ok: u32,
-    exact: u32,
-    t: [f32; WIDTH],
-    u: [f32; WIDTH],
-    v: [f32; WIDTH],
+/// A triangle as a packet's hits record it: its tile and [`Found16::at`].
+#[derive(Clone, Copy)]
+struct Taken {
+    arr: u32,
+    at: u64,
 }
 
 impl PacketTri {
@@ -298,31 +294,37 @@ impl PacketTri {
 
     /// [`PacketTri::test_k`] for this packet's axes.
     #[inline(always)]
-    fn test(&self, b: &Block, lane: usize, t_max: &[f32; WIDTH]) -> Hits16 {
+    fn test(&self, b: &Block, lane: usize, live: &[bool; WIDTH], hit: Taken, t_max: &mut [f32; WIDTH], res: &mut Found16) -> u32 {
         match self.kz {
-            0 => self.test_k::<1, 2, 0>(b, lane, t_max),
-            1 => self.test_k::<2, 0, 1>(b, lane, t_max),
-            _ => self.test_k::<0, 1, 2>(b, lane, t_max),
+            0 => self.test_k::<1, 2, 0>(b, lane, live, hit, t_max, res),
+            1 => self.test_k::<2, 0, 1>(b, lane, live, hit, t_max, res),
+            _ => self.test_k::<0, 1, 2>(b, lane, live, hit, t_max, res),
         }
     }
 
-    /// Lane `lane` of block `b` against every ray: per ray exactly the operations of
+    /// Lane `lane` of block `b` against the `live` rays: per ray exactly the operations of
     /// `RayTri4::test` (and so of the scalar reference), in plain loops over the 16 rays
-    /// that the compiler vectorizes.
+    /// that the compiler vectorizes. The rays that hit it nearer than their `t_max` take it
+    /// (`hit` into `res`, selects across the lanes: no branch); returned are the rays that
+    /// must take the reference's double-precision path instead (an edge function exactly
+    /// zero).
+    // Lane loops index several arrays in step (the form that vectorizes).
+    #[allow(clippy::needless_range_loop)]
     #[inline(always)]
     fn test_k<const KX: usize, const KY: usize, const KZ: usize>(
         &self,
         b: &Block,
         lane: usize,
-        t_max: &[f32; WIDTH],
-    ) -> Hits16 {
+        live: &[bool; WIDTH],
+        hit: Taken,
+        t_max: &mut [f32; WIDTH],
+        res: &mut Found16,
+    ) -> u32 {
         let (kx, ky, kz) = (KX, KY, KZ);
         let c = |corner: usize, k: usize| b[3 * corner + k][lane];
         let (a_x, a_y, a_z) = (c(0, kx), c(0, ky), c(0, kz));
         let (b_x, b_y, b_z) = (c(1, kx), c(1, ky), c(1, kz));
         let (c_x, c_y, c_z) = (c(2, kx), c(2, ky), c(2, kz));
-        let mut h = Hits16 { ok: 0, exact: 0, t: [0.0; WIDTH], u: [0.0; WIDTH], v: [0.0; WIDTH] };
-        let mut ok = [false; WIDTH];
         let mut exact = [false; WIDTH];
         for r in 0..WIDTH {
             let (ox, oy, oz) = (self.ox[r], self.oy[r], self.oz[r]);
@@ -347,16 +349,19 @@ impl PacketTri {
             let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
             let inv_det = 1.0 / det;
             let t = t_scaled * inv_det;
-            ok[r] = !(neg & pos) & (det != 0.0) & (t >= self.t_min[r]) & (t < t_max[r]);
-            h.t[r] = t;
-            h.u[r] = v * inv_det;
-            h.v[r] = w * inv_det;
+            let ok = !(neg & pos) & (det != 0.0) & (t >= self.t_min[r]) & (t < t_max[r]) & !exact[r] & live[r];
+            t_max[r] = if ok { t } else { t_max[r] };
+            res.u[r] = if ok { v * inv_det } else { res.u[r] };
+            res.v[r] = if ok { w * inv_det } else { res.v[r] };
+            res.arr[r] = if ok { hit.arr } else { res.arr[r] };
+            res.at_lo[r] = if ok { hit.at as u32 } else { res.at_lo[r] };
+            res.at_hi[r] = if ok { (hit.at >> 32) as u32 } else { res.at_hi[r] };
         }
+        let mut m = 0;
         for r in 0..WIDTH {
-            h.ok |= (ok[r] as u32) << r;
-            h.exact |= (exact[r] as u32) << r;
+            m |= (exact[r] as u32) << r;
         }
-        h
+        m
     }
 }
 
@@ -450,8 +455,10 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
         p.iz[i] = 1.0 / fix(r.dir.z);
         p.t_min[i] = r.t_min;
         p.t_max[i] = r.t_max;
-        hits[i] = None;
     }
+    // Each ray's closest hit so far, recorded without its part, slot and corners, which are
+    // looked up once at the end.
+    let mut res = Found16 { u: [0.0; WIDTH], v: [0.0; WIDTH], at_lo: [u32::MAX; WIDTH], at_hi: [u32::MAX; WIDTH], arr: [0; WIDTH] };
     // Unused lanes repeat ray 0 (they never enter a box: their `t_max` is -inf), so that
     // the packet's bounds can be taken over all 16 lanes.
     for i in n..WIDTH {
@@ -482,28 +489,24 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
             {
                 // Triangle by triangle, against all rays; hits update each ray's closest.
                 let pt = coherent.as_ref().and_then(|c| c.as_ref()).expect("checked");
-                let (part, slot0) = tracer.slots(c, unit);
+                let mut live_b = [false; WIDTH];
+                for (r, l) in live_b.iter_mut().enumerate() {
+                    *l = live & (1 << r) != 0;
+                }
                 for i in 0..count {
                     let (blk, lane) = (i / 4, (i % 4) as usize);
-                    let b = tracer.block_at(unit + 9 * blk as u64);
+                    let b_unit = unit + 9 * blk as u64;
+                    let b = tracer.block_at(b_unit);
                     crate::stats::count(|s| s.blocks += (lane == 0) as u64);
-                    let h = pt.test(b, lane, &p.t_max);
-                    let prim = slot0 + 4 * blk + lane as u32;
-                    let mut m = h.ok & live & !h.exact;
-                    while m != 0 {
-                        let r = m.trailing_zeros() as usize;
-                        m &= m - 1;
-                        p.t_max[r] = h.t[r];
-                        hits[r] = Some(Hit { t: h.t[r], u: h.u[r], v: h.v[r], part, prim, tri: corners(b, lane) });
-                    }
+                    let at = (b_unit << 2) | lane as u64;
+                    let exact = pt.test(b, lane, &live_b, Taken { arr: c, at }, &mut p.t_max, &mut res);
                     // An edge exactly on the ray: the reference's double-precision path.
-                    let mut m = h.exact & live;
+                    let mut m = exact & live;
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
                         if let Some(t) = WatertightRay::new(&rays[r]).intersect(&corners(b, lane), p.t_max[r]) {
-                            p.t_max[r] = t.t;
-                            hits[r] = Some(Hit { t: t.t, u: t.u, v: t.v, part, prim, tri: corners(b, lane) });
+                            res.record(r, t.t, t.u, t.v, at, c, &mut p.t_max);
                         }
                     }
                 }
@@ -511,7 +514,6 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
             }
             Step::Leaf { unit, count } => {
                 // Each ray that entered the box tests the triangles.
-                let (part, slot0) = tracer.slots(c, unit);
                 let mut m = live;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize;
@@ -522,12 +524,11 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
                     let mut blk = 0;
                     while left > 0 {
                         let lanes = if left >= 4 { 0b1111 } else { (1u32 << left) - 1 };
-                        let b = tracer.block_at(unit + 9 * blk as u64);
+                        let b_unit = unit + 9 * blk as u64;
+                        let b = tracer.block_at(b_unit);
                         crate::stats::count(|s| s.blocks += 1);
                         if let Some((lane, h)) = rt.test(b, lanes, p.t_max[r]) {
-                            p.t_max[r] = h.t;
-                            let prim = slot0 + 4 * blk + lane as u32;
-                            hits[r] = Some(Hit { t: h.t, u: h.u, v: h.v, part, prim, tri: corners(b, lane) });
+                            res.record(r, h.t, h.u, h.v, (b_unit << 2) | lane as u64, c, &mut p.t_max);
                         }
                         left = left.saturating_sub(4);
                         blk += 1;
@@ -580,5 +581,42 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
                 j -= 1;
             }
         }
+    }
+    for (r, hit) in hits.iter_mut().enumerate() {
+        let at = (res.at_hi[r] as u64) << 32 | res.at_lo[r] as u64;
+        if at == NONE {
+            *hit = None;
+            continue;
+        }
+        let (unit, lane) = (at >> 2, (at & 3) as usize);
+        let (part, slot0) = tracer.slots(res.arr[r], unit);
+        let tri = corners(tracer.block_at(unit), lane);
+        *hit = Some(Hit { t: p.t_max[r], u: res.u[r], v: res.v[r], part, prim: slot0 + lane as u32, tri });
+    }
+}
+
+/// What [`Found16::at`] holds for a ray that has hit nothing.
+const NONE: u64 = u64::MAX;
+
+/// The closest hit so far of each ray of a packet (its distance is the ray's `t_max`).
+struct Found16 {
+    u: [f32; WIDTH],
+    v: [f32; WIDTH],
+    /// The unit of the hit triangle's block, times 4, plus its lane, in its low and high
+    /// 32 bits (so that every lane of the selects is 32 bits wide); [`NONE`] for none yet.
+    at_lo: [u32; WIDTH],
+    at_hi: [u32; WIDTH],
+    /// The tile the block lies in.
+    arr: [u32; WIDTH],
+}
+
+impl Found16 {
+    /// Ray `r` hits the triangle at `at` (of tile `arr`) at `t`, nearer than before.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn record(&mut self, r: usize, t: f32, u: f32, v: f32, at: u64, arr: u32, t_max: &mut [f32; WIDTH]) {
+        t_max[r] = t;
+        (self.u[r], self.v[r], self.arr[r]) = (u, v, arr);
+        (self.at_lo[r], self.at_hi[r]) = (at as u32, (at >> 32) as u32);
     }
 }
