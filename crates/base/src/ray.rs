@@ -16,6 +16,48 @@ impl Ray {
     }
 }
 
+/// Up to 16 rays as structure of arrays: what the packet kernel reads, made so by whoever
+/// makes the rays (a camera's 4x4 pixels), with no transposition in between. Lanes from
+/// `len` on are unused: their contents are ignored.
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(64))]
+pub struct Rays16 {
+    /// Origins, per axis.
+    pub org: [[f32; 16]; 3],
+    /// Directions, per axis.
+    pub dir: [[f32; 16]; 3],
+    pub t_min: [f32; 16],
+    pub t_max: [f32; 16],
+    /// How many lanes hold rays (at most 16).
+    pub len: usize,
+}
+
+impl Rays16 {
+    /// The rays of `rays` (at most 16).
+    pub fn from_rays(rays: &[Ray]) -> Rays16 {
+        assert!(rays.len() <= 16, "a packet holds at most 16 rays, not {}", rays.len());
+        let mut p =
+            Rays16 { org: [[0.0; 16]; 3], dir: [[0.0; 16]; 3], t_min: [0.0; 16], t_max: [0.0; 16], len: rays.len() };
+        for (i, r) in rays.iter().enumerate() {
+            (p.org[0][i], p.org[1][i], p.org[2][i]) = (r.org.x, r.org.y, r.org.z);
+            (p.dir[0][i], p.dir[1][i], p.dir[2][i]) = (r.dir.x, r.dir.y, r.dir.z);
+            (p.t_min[i], p.t_max[i]) = (r.t_min, r.t_max);
+        }
+        p
+    }
+
+    /// The ray in lane `i`.
+    #[inline]
+    pub fn ray(&self, i: usize) -> Ray {
+        Ray {
+            org: Vec3::new(self.org[0][i], self.org[1][i], self.org[2][i]),
+            dir: Vec3::new(self.dir[0][i], self.dir[1][i], self.dir[2][i]),
+            t_min: self.t_min[i],
+            t_max: self.t_max[i],
+        }
+    }
+}
+
 /// A ray-triangle hit: distance along the ray and barycentrics (`u` weights corner 1,
 /// `v` corner 2, `1 - u - v` corner 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -41,6 +83,28 @@ pub fn intersect_triangle(ray: &Ray, tri: [Vec3; 3], t_max: f32) -> Option<TriHi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A packet gives back exactly the rays it was made of, in order.
+    #[test]
+    fn rays16_round_trip() {
+        let rays: Vec<Ray> = (0..11)
+            .map(|i| {
+                let f = i as f32;
+                Ray {
+                    org: Vec3::new(f, -f, 0.5 * f),
+                    dir: Vec3::new(1.0, f, -2.0 * f),
+                    t_min: 0.1 * f,
+                    t_max: 10.0 + f,
+                }
+            })
+            .collect();
+        let p = Rays16::from_rays(&rays);
+        assert_eq!(p.len, 11);
+        for (i, r) in rays.iter().enumerate() {
+            let q = p.ray(i);
+            assert_eq!((q.org, q.dir, q.t_min, q.t_max), (r.org, r.dir, r.t_min, r.t_max));
+        }
+    }
 
     #[test]
     fn hits_inside_misses_outside() {

@@ -395,8 +395,9 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
                         // Sixteen rays of the row made at once (the same bits), traced one by one.
                         while x + 16 <= x1 {
                             let sx: [f32; 16] = std::array::from_fn(|k| (x + k as u32) as f32 + 0.5);
-                            for r in &cam.rays16(&sx, &[y as f32 + 0.5; 16]) {
-                                add(&mut a, tracer.intersect(r));
+                            let rays = cam.rays16(&sx, &[y as f32 + 0.5; 16]);
+                            for k in 0..16 {
+                                add(&mut a, tracer.intersect(&rays.ray(k)));
                             }
                             x += 16;
                         }
@@ -490,7 +491,7 @@ fn packets(tracer: &Tracer, cam: &Camera, (x0, y0, x1, y1): (u32, u32, u32, u32)
                 // A whole packet inside the image: its rays made together (the same bits).
                 let sx: [f32; 16] = std::array::from_fn(|k| (px + k as u32 % pw) as f32 + 0.5);
                 let sy: [f32; 16] = std::array::from_fn(|k| (py + k as u32 / pw) as f32 + 0.5);
-                rays = cam.rays16(&sx, &sy);
+                tracer.intersect16(&cam.rays16(&sx, &sy), &mut hits);
                 n = 16;
             } else {
                 for k in 0..pw * ph {
@@ -500,8 +501,8 @@ fn packets(tracer: &Tracer, cam: &Camera, (x0, y0, x1, y1): (u32, u32, u32, u32)
                         n += 1;
                     }
                 }
+                tracer.intersect_packet(&rays[..n], &mut hits[..n]);
             }
-            tracer.intersect_packet(&rays[..n], &mut hits[..n]);
             for &h in &hits[..n] {
                 add(&mut a, h);
             }

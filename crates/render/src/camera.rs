@@ -1,4 +1,4 @@
-use megaray_base::{Aabb, Ray, Vec3};
+use megaray_base::{Aabb, Ray, Rays16, Vec3};
 
 /// A pinhole camera. Pixel (0, 0) is the top-left; rays go through pixel centres at
 /// sample offset (0.5, 0.5), exactly as the benchmark definitions (`shared/BENCH.md`) say.
@@ -50,11 +50,18 @@ impl Camera {
 
     /// [`Camera::ray`] at 16 image positions at once (a packet's pixels): lane for lane the
     /// same operations in the same order, so the same bits, in loops the compiler vectorizes.
-    pub fn rays16(&self, px: &[f32; 16], py: &[f32; 16]) -> [Ray; 16] {
+    /// As the packet kernel reads them ([`Rays16`]: structure of arrays).
+    pub fn rays16(&self, px: &[f32; 16], py: &[f32; 16]) -> Rays16 {
         let aspect = self.width as f32 / self.height as f32;
         let (w, h) = (self.width as f32, self.height as f32);
         let (f, r, u) = (self.fwd, self.right, self.up);
-        let (mut dx, mut dy, mut dz) = ([0f32; 16], [0f32; 16], [0f32; 16]);
+        let mut p = Rays16 {
+            org: [[self.eye.x; 16], [self.eye.y; 16], [self.eye.z; 16]],
+            dir: [[0.0; 16]; 3],
+            t_min: [0.0; 16],
+            t_max: [f32::INFINITY; 16],
+            len: 16,
+        };
         for i in 0..16 {
             let sx = (2.0 * px[i] / w - 1.0) * self.tan_half * aspect;
             let sy = (1.0 - 2.0 * py[i] / h) * self.tan_half;
@@ -62,9 +69,9 @@ impl Camera {
             // reciprocal of the square root of the dot product.
             let (x, y, z) = (f.x + r.x * sx + u.x * sy, f.y + r.y * sx + u.y * sy, f.z + r.z * sx + u.z * sy);
             let inv = 1.0 / (x * x + y * y + z * z).sqrt();
-            (dx[i], dy[i], dz[i]) = (x * inv, y * inv, z * inv);
+            (p.dir[0][i], p.dir[1][i], p.dir[2][i]) = (x * inv, y * inv, z * inv);
         }
-        std::array::from_fn(|i| Ray::new(self.eye, Vec3::new(dx[i], dy[i], dz[i])))
+        p
     }
 }
 
@@ -90,8 +97,11 @@ mod tests {
                     let batch = cam.rays16(&px, &py);
                     for i in 0..16 {
                         let one = cam.ray(px[i], py[i]);
-                        assert_eq!(batch[i].dir.to_array().map(f32::to_bits), one.dir.to_array().map(f32::to_bits));
-                        assert_eq!(batch[i].org, one.org);
+                        let batch = batch.ray(i);
+                        assert_eq!(batch.t_min, one.t_min);
+                        assert_eq!(batch.t_max, one.t_max);
+                        assert_eq!(batch.dir.to_array().map(f32::to_bits), one.dir.to_array().map(f32::to_bits));
+                        assert_eq!(batch.org, one.org);
                     }
                 }
             }

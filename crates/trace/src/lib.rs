@@ -24,7 +24,7 @@ pub mod packet;
 pub mod stats;
 
 use glam::{Vec3A, Vec4};
-use megaray_base::{Ray, TriHit, Vec3, WatertightRay};
+use megaray_base::{Ray, Rays16, TriHit, Vec3, WatertightRay};
 use megaray_page::{Access, Pager};
 use megaray_scene::format::{ChildRef, Node8, NODE_BYTES, NODE_WIDTH};
 use megaray_scene::{CheckedTiles, Scene, TileEntry};
@@ -972,10 +972,25 @@ impl<'s> Tracer<'s> {
     /// [`packet::Isa::available`]); for tests and benchmarks.
     pub fn intersect_packet_with(&self, rays: &[Ray], hits: &mut [Option<Hit>], isa: packet::Isa) {
         assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
+        for (r, h) in rays.chunks(packet::WIDTH).zip(hits.chunks_mut(packet::WIDTH)) {
+            self.intersect16_with(&Rays16::from_rays(r), h, isa);
+        }
+    }
+
+    /// [`Tracer::intersect_packet`] of rays already in structure of arrays (as
+    /// [`Rays16`]; the hits of its `len` rays into the first `len` of `hits`).
+    pub fn intersect16(&self, rays: &Rays16, hits: &mut [Option<Hit>]) {
+        self.intersect16_with(rays, hits, packet::Isa::detect());
+    }
+
+    /// [`Tracer::intersect16`] on a chosen instruction set.
+    pub fn intersect16_with(&self, rays: &Rays16, hits: &mut [Option<Hit>], isa: packet::Isa) {
+        assert!(rays.len <= packet::WIDTH && rays.len <= hits.len(), "one hit slot per ray, at most 16");
+        let hits = &mut hits[..rays.len];
         if self.pager.is_some() {
             // Packets do not suspend: a paged tracer traces them ray by ray.
-            for (r, h) in rays.iter().zip(hits.iter_mut()) {
-                *h = self.intersect(r);
+            for (i, h) in hits.iter_mut().enumerate() {
+                *h = self.intersect(&rays.ray(i));
             }
             return;
         }
@@ -984,11 +999,7 @@ impl<'s> Tracer<'s> {
         thread_local! {
             static STACK: std::cell::RefCell<packet::PacketStack> = const { std::cell::RefCell::new(Vec::new()) };
         }
-        STACK.with_borrow_mut(|stack| {
-            for (r, h) in rays.chunks(packet::WIDTH).zip(hits.chunks_mut(packet::WIDTH)) {
-                packet::intersect16(self, r, h, isa, stack);
-            }
-        });
+        STACK.with_borrow_mut(|stack| packet::intersect16(self, rays, hits, isa, stack));
     }
 
     /// [`Tracer::intersect`] (or, `any`, [`Tracer::occluded`]) of an unpaged tracer with

@@ -12,7 +12,7 @@
 use std::sync::OnceLock;
 
 use crate::{corners, fmax, fmin, Block, Entry, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
-use megaray_base::{Ray, WatertightRay};
+use megaray_base::{Rays16, WatertightRay};
 use megaray_scene::format::Node8;
 
 /// Rays in a packet.
@@ -239,19 +239,11 @@ impl PacketTri {
     /// `None` unless every ray has the same dominant axis.
     // Lane loops index several arrays in step (the form that vectorizes).
     #[allow(clippy::needless_range_loop)]
-    fn new(rays: &[Ray]) -> Option<PacketTri> {
-        let kz = WatertightRay::new(&rays[0]).k[2];
+    /// `rays`' unused lanes repeat ray 0.
+    fn new(rays: &Rays16) -> Option<PacketTri> {
+        let kz = WatertightRay::new(&rays.ray(0)).k[2];
         let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
-        // The rays as structure of arrays (lanes past the packet repeat ray 0).
-        let mut d = [[0f32; WIDTH]; 3];
-        let mut o = [[0f32; WIDTH]; 3];
-        let mut t_min = [0f32; WIDTH];
-        for i in 0..WIDTH {
-            let r = rays.get(i).unwrap_or(&rays[0]);
-            (d[0][i], d[1][i], d[2][i]) = (r.dir.x, r.dir.y, r.dir.z);
-            (o[0][i], o[1][i], o[2][i]) = (r.org.x, r.org.y, r.org.z);
-            t_min[i] = r.t_min;
-        }
+        let (d, o, t_min) = (&rays.dir, &rays.org, rays.t_min);
         // Every lane's axis must be ray 0's: `WatertightRay::new`'s comparisons, branch-free,
         // over all lanes at once.
         let mut differ = 0u32;
@@ -294,7 +286,15 @@ impl PacketTri {
 
     /// [`PacketTri::test_k`] for this packet's axes.
     #[inline(always)]
-    fn test(&self, b: &Block, lane: usize, live: &[bool; WIDTH], hit: Taken, t_max: &mut [f32; WIDTH], res: &mut Found16) -> u32 {
+    fn test(
+        &self,
+        b: &Block,
+        lane: usize,
+        live: &[bool; WIDTH],
+        hit: Taken,
+        t_max: &mut [f32; WIDTH],
+        res: &mut Found16,
+    ) -> u32 {
         match self.kz {
             0 => self.test_k::<1, 2, 0>(b, lane, live, hit, t_max, res),
             1 => self.test_k::<2, 0, 1>(b, lane, live, hit, t_max, res),
@@ -402,8 +402,8 @@ fn le_mask_avx512(a: &[f32; WIDTH], b: &[f32; WIDTH]) -> u32 {
 pub(crate) type PacketStack = Vec<(Entry, u32, [f32; WIDTH])>;
 
 /// Traces up to 16 rays as one packet with the given instruction set, on `stack` (left empty).
-pub(crate) fn intersect16(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], isa: Isa, stack: &mut PacketStack) {
-    debug_assert!(rays.len() <= WIDTH && rays.len() == hits.len());
+pub(crate) fn intersect16(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hit>], isa: Isa, stack: &mut PacketStack) {
+    debug_assert!(rays.len <= WIDTH && rays.len == hits.len());
     match isa {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: `Isa::Avx512` is only produced by `detect`/`available` after
@@ -418,13 +418,13 @@ pub(crate) fn intersect16(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-unsafe fn traverse_avx512(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], stack: &mut PacketStack) {
+unsafe fn traverse_avx512(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hit>], stack: &mut PacketStack) {
     traverse::<AVX512>(tracer, rays, hits, stack)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn traverse_avx2(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], stack: &mut PacketStack) {
+unsafe fn traverse_avx2(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hit>], stack: &mut PacketStack) {
     traverse::<BASE>(tracer, rays, hits, stack)
 }
 
@@ -432,40 +432,44 @@ unsafe fn traverse_avx2(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>],
 /// only decide which nodes are visited (conservatively, as in the single-ray kernel), and the
 /// triangle tests are the single-ray ones.
 #[inline(always)]
-fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit>], stack: &mut PacketStack) {
-    let n = rays.len();
+fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hit>], stack: &mut PacketStack) {
+    let n = rays.len;
     crate::stats::count(|s| s.rays += n as u64);
+    // Unused lanes repeat ray 0 (they never enter a box: their `t_max` is -inf), so that
+    // the packet's bounds can be taken over all 16 lanes.
+    let mut q = *rays;
+    for i in n..WIDTH {
+        for a in 0..3 {
+            (q.org[a][i], q.dir[a][i]) = (q.org[a][0], q.dir[a][0]);
+        }
+        (q.t_min[i], q.t_max[i]) = (q.t_min[0], f32::NEG_INFINITY);
+    }
+    let rays = &q;
     let fix = |d: f32| if d.abs() < 1e-20 { 1e-20f32.copysign(d) } else { d };
     let mut p = Packet {
-        ox: [0.0; WIDTH],
-        oy: [0.0; WIDTH],
-        oz: [0.0; WIDTH],
-        ix: [1.0; WIDTH],
-        iy: [1.0; WIDTH],
-        iz: [1.0; WIDTH],
-        t_min: [0.0; WIDTH],
-        t_max: [f32::NEG_INFINITY; WIDTH], // unused lanes never hit anything
+        ox: q.org[0],
+        oy: q.org[1],
+        oz: q.org[2],
+        ix: [0.0; WIDTH],
+        iy: [0.0; WIDTH],
+        iz: [0.0; WIDTH],
+        t_min: q.t_min,
+        t_max: q.t_max,
     };
-    for (i, r) in rays.iter().enumerate() {
-        p.ox[i] = r.org.x;
-        p.oy[i] = r.org.y;
-        p.oz[i] = r.org.z;
-        p.ix[i] = 1.0 / fix(r.dir.x);
-        p.iy[i] = 1.0 / fix(r.dir.y);
-        p.iz[i] = 1.0 / fix(r.dir.z);
-        p.t_min[i] = r.t_min;
-        p.t_max[i] = r.t_max;
+    for i in 0..WIDTH {
+        p.ix[i] = 1.0 / fix(q.dir[0][i]);
+        p.iy[i] = 1.0 / fix(q.dir[1][i]);
+        p.iz[i] = 1.0 / fix(q.dir[2][i]);
     }
     // Each ray's closest hit so far, recorded without its part, slot and corners, which are
     // looked up once at the end.
-    let mut res = Found16 { u: [0.0; WIDTH], v: [0.0; WIDTH], at_lo: [u32::MAX; WIDTH], at_hi: [u32::MAX; WIDTH], arr: [0; WIDTH] };
-    // Unused lanes repeat ray 0 (they never enter a box: their `t_max` is -inf), so that
-    // the packet's bounds can be taken over all 16 lanes.
-    for i in n..WIDTH {
-        (p.ox[i], p.oy[i], p.oz[i]) = (p.ox[0], p.oy[0], p.oz[0]);
-        (p.ix[i], p.iy[i], p.iz[i]) = (p.ix[0], p.iy[0], p.iz[0]);
-        p.t_min[i] = p.t_min[0];
-    }
+    let mut res = Found16 {
+        u: [0.0; WIDTH],
+        v: [0.0; WIDTH],
+        at_lo: [u32::MAX; WIDTH],
+        at_hi: [u32::MAX; WIDTH],
+        arr: [0; WIDTH],
+    };
     // Coherent packets test each triangle against all their rays at once (the constants
     // are made when the first leaf with several rays is reached).
     let mut coherent: Option<Option<PacketTri>> = None;
@@ -505,7 +509,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
                     while m != 0 {
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
-                        if let Some(t) = WatertightRay::new(&rays[r]).intersect(&corners(b, lane), p.t_max[r]) {
+                        if let Some(t) = WatertightRay::new(&rays.ray(r)).intersect(&corners(b, lane), p.t_max[r]) {
                             res.record(r, t.t, t.u, t.v, at, c, &mut p.t_max);
                         }
                     }
@@ -519,7 +523,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
                     let r = m.trailing_zeros() as usize;
                     m &= m - 1;
                     // Made per leaf: cheaper than keeping 16 of them (3 KiB to initialise).
-                    let rt = RayTri4::new(&rays[r]);
+                    let rt = RayTri4::new(&rays.ray(r));
                     let mut left = count;
                     let mut blk = 0;
                     while left > 0 {
@@ -582,7 +586,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &[Ray], hits: &mut [Option<Hit
             }
         }
     }
-    for (r, hit) in hits.iter_mut().enumerate() {
+    for (r, hit) in hits.iter_mut().take(n).enumerate() {
         let at = (res.at_hi[r] as u64) << 32 | res.at_lo[r] as u64;
         if at == NONE {
             *hit = None;
