@@ -578,6 +578,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
             // Children ordered far to near by the entry distance of their first ray (an
             // order for speed only; culling uses every ray's own distance).
             let key = t0[m.trailing_zeros() as usize];
+            tracer.prefetch(node.child[k]);
             stack.push((Entry { r: node.child[k], arr, t: key }, m, t0));
             let mut j = stack.len() - 1;
             while j > base && stack[j - 1].0.t < key {
