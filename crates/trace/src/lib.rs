@@ -26,7 +26,7 @@ pub mod stats;
 use glam::{Vec3A, Vec4};
 use megaray_base::{Ray, Rays16, TriHit, Vec3, WatertightRay};
 use megaray_page::{Access, Pager};
-use megaray_scene::format::{ChildRef, Node8, NODE_BYTES, NODE_WIDTH};
+use megaray_scene::format::{ChildRef, Node8, Tri4, NODE_BYTES, NODE_WIDTH};
 use megaray_scene::{CheckedTiles, Scene, TileEntry};
 use std::cell::RefCell;
 
@@ -840,8 +840,8 @@ impl<'s> Tracer<'s> {
         Step::Node(&self.nodes[node as usize], arr)
     }
 
-    /// Starts loading the node or triangle block that child reference `r` names (its first
-    /// 256 bytes: a whole node, or a block and most of the next), as Embree's traversal does
+    /// Starts loading the node or leaf that child reference `r` names (a whole node, 256
+    /// bytes; a leaf's one or two blocks, 144 or 288), as Embree's traversal does
     /// for the children it hits. Called for the children pushed (the nearest is loaded next
     /// anyway): they are popped later and find their data in cache, so an incoherent ray's
     /// misses overlap instead of queueing.
@@ -854,6 +854,12 @@ impl<'s> Tracer<'s> {
         let at = if r & (1 << 62) == 0 {
             (r & ChildRef::MAX_NODE) as usize * NODE_BYTES
         } else if (r as i64) >= 0 {
+            let p = base.wrapping_add((r & ChildRef::MAX_UNIT) as usize * 16);
+            if (r >> 40) & 0xff > 4 {
+                // Two blocks, 288 bytes: the lines past the first 256 bytes too.
+                megaray_base::prefetch_addr(p.wrapping_add(256));
+                megaray_base::prefetch_addr(p.wrapping_add(2 * std::mem::size_of::<Tri4>() - 1));
+            }
             (r & ChildRef::MAX_UNIT) as usize * 16
         } else {
             return;
