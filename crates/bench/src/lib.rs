@@ -487,10 +487,11 @@ fn packets(tracer: &Tracer, cam: &Camera, (x0, y0, x1, y1): (u32, u32, u32, u32)
     for py in (y0..y1).step_by(ph as usize) {
         for px in (x0..x1).step_by(pw as usize) {
             let mut n = 0;
-            if pw * ph == 16 && px + pw <= cam.width && py + ph <= cam.height {
-                // A whole packet inside the image: its rays made together (the same bits).
-                let sx: [f32; 16] = std::array::from_fn(|k| (px + k as u32 % pw) as f32 + 0.5);
-                let sy: [f32; 16] = std::array::from_fn(|k| (py + k as u32 / pw) as f32 + 0.5);
+            if (pw, ph) == (4, 4) && px + 4 <= cam.width && py + 4 <= cam.height {
+                // A whole 4x4 packet inside the image: its rays made together (the same bits;
+                // lane k is pixel (k % 4, k / 4), by shifts: no division per lane).
+                let sx: [f32; 16] = std::array::from_fn(|k| (px + (k as u32 & 3)) as f32 + 0.5);
+                let sy: [f32; 16] = std::array::from_fn(|k| (py + (k as u32 >> 2)) as f32 + 0.5);
                 tracer.intersect16(&cam.rays16(&sx, &sy), &mut hits);
                 n = 16;
             } else {
