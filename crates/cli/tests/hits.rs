@@ -5,7 +5,7 @@ mod common;
 use common::*;
 use megaray_base::{intersect_triangle, Ray, Vec3};
 use megaray_scene::Scene;
-use megaray_trace::Tracer;
+use megaray_trace::{Hit, Tracer};
 use rayon::prelude::*;
 
 /// Every triangle of the scene, read back from its tiles.
@@ -182,15 +182,35 @@ fn packet_kernels_equal_single_rays() {
     }
     let isas = Isa::available();
     assert!(isas.contains(&Isa::Baseline));
+    // The whole hit, not only its distance: barycentrics, part, slot and corners are looked
+    // up by the packet kernel after its walk, from what it recorded per ray.
+    let same = |h: Option<Hit>, want: Option<Hit>, what: &dyn Fn() -> String| {
+        let key = |h: Option<Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.part, h.prim, h.tri));
+        assert_eq!(key(h), key(want), "{}", what());
+    };
     let mut compared = 0;
     for &isa in isas {
         for p in &packets {
             let mut hits = vec![None; p.len()];
             tracer.intersect_packet_with(p, &mut hits, isa);
             for (r, h) in p.iter().zip(&hits) {
-                let want = tracer.intersect(r);
-                assert_eq!(h.map(|h| h.t), want.map(|w| w.t), "{isa:?}: ray {r:?}");
+                same(*h, tracer.intersect(r), &|| format!("{isa:?}: ray {r:?}"));
                 compared += 1;
+            }
+        }
+        // Camera packets made in structure of arrays, as the bench traces them.
+        let cam = megaray_render::Camera::framing(&b, megaray_render::CLOSE_OFFSET, 128, 128);
+        for py in (0..128).step_by(4) {
+            for px in (0..128).step_by(4) {
+                let sx: [f32; 16] = std::array::from_fn(|i| (px + i % 4) as f32 + 0.5);
+                let sy: [f32; 16] = std::array::from_fn(|i| (py + i / 4) as f32 + 0.5);
+                let rays = cam.rays16(&sx, &sy);
+                let mut hits = [None; 16];
+                tracer.intersect16_with(&rays, &mut hits, isa);
+                for (i, h) in hits.iter().enumerate() {
+                    same(*h, tracer.intersect(&rays.ray(i)), &|| format!("{isa:?}: camera ray {i} of ({px}, {py})"));
+                    compared += 1;
+                }
             }
         }
     }
