@@ -854,13 +854,14 @@ impl<'s> Tracer<'s> {
         let at = if r & (1 << 62) == 0 {
             (r & ChildRef::MAX_NODE) as usize * NODE_BYTES
         } else if (r as i64) >= 0 {
-            let p = base.wrapping_add((r & ChildRef::MAX_UNIT) as usize * 16);
+            let at = (r & ChildRef::MAX_UNIT) as usize * 16;
             if (r >> 40) & 0xff > 4 {
                 // Two blocks, 288 bytes: the lines past the first 256 bytes too.
+                let p = base.wrapping_add(at);
                 megaray_base::prefetch_addr(p.wrapping_add(256));
                 megaray_base::prefetch_addr(p.wrapping_add(2 * std::mem::size_of::<Tri4>() - 1));
             }
-            (r & ChildRef::MAX_UNIT) as usize * 16
+            at
         } else {
             return;
         };
@@ -870,8 +871,8 @@ impl<'s> Tracer<'s> {
         }
     }
 
-    /// The [`Hit`] of what the single-ray kernel found: its part, slot and corners.
-    #[inline]
+    /// The [`Hit`] of what a kernel found (single-ray or packet): its part, slot and corners.
+    #[inline(always)]
     fn hit_of(&self, f: Option<Found>) -> Option<Hit> {
         let f = f?;
         let (part, slot0) = self.slots(f.arr, f.unit);

@@ -11,8 +11,8 @@
 
 use std::sync::OnceLock;
 
-use crate::{corners, fmax, fmin, Block, Entry, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
-use megaray_base::{Rays16, WatertightRay};
+use crate::{corners, fmax, fmin, Block, Entry, Found, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
+use megaray_base::{Rays16, TriHit, WatertightRay};
 use megaray_scene::format::Node8;
 
 /// Rays in a packet.
@@ -236,10 +236,10 @@ struct Taken {
 }
 
 impl PacketTri {
-    /// `None` unless every ray has the same dominant axis.
+    /// `None` unless every ray has the same dominant axis. `rays`' unused lanes repeat
+    /// ray 0.
     // Lane loops index several arrays in step (the form that vectorizes).
     #[allow(clippy::needless_range_loop)]
-    /// `rays`' unused lanes repeat ray 0.
     fn new(rays: &Rays16) -> Option<PacketTri> {
         let kz = WatertightRay::new(&rays.ray(0)).k[2];
         let (kx, ky) = ((kz + 1) % 3, (kz + 2) % 3);
@@ -510,7 +510,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
                         let r = m.trailing_zeros() as usize;
                         m &= m - 1;
                         if let Some(t) = WatertightRay::new(&rays.ray(r)).intersect(&corners(b, lane), p.t_max[r]) {
-                            res.record(r, t.t, t.u, t.v, at, c, &mut p.t_max);
+                            res.record(r, t, Taken { arr: c, at }, &mut p.t_max);
                         }
                     }
                 }
@@ -532,7 +532,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
                         let b = tracer.block_at(b_unit);
                         crate::stats::count(|s| s.blocks += 1);
                         if let Some((lane, h)) = rt.test(b, lanes, p.t_max[r]) {
-                            res.record(r, h.t, h.u, h.v, (b_unit << 2) | lane as u64, c, &mut p.t_max);
+                            res.record(r, h, Taken { arr: c, at: (b_unit << 2) | lane as u64 }, &mut p.t_max);
                         }
                         left = left.saturating_sub(4);
                         blk += 1;
@@ -589,14 +589,12 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
     }
     for (r, hit) in hits.iter_mut().take(n).enumerate() {
         let at = (res.at_hi[r] as u64) << 32 | res.at_lo[r] as u64;
-        if at == NONE {
-            *hit = None;
-            continue;
-        }
-        let (unit, lane) = (at >> 2, (at & 3) as usize);
-        let (part, slot0) = tracer.slots(res.arr[r], unit);
-        let tri = corners(tracer.block_at(unit), lane);
-        *hit = Some(Hit { t: p.t_max[r], u: res.u[r], v: res.v[r], part, prim: slot0 + lane as u32, tri });
+        *hit = if at == NONE {
+            None
+        } else {
+            let h = TriHit { t: p.t_max[r], u: res.u[r], v: res.v[r] };
+            tracer.hit_of(Some(Found::new(h, res.arr[r], at >> 2, (at & 3) as usize)))
+        };
     }
 }
 
@@ -616,12 +614,11 @@ struct Found16 {
 }
 
 impl Found16 {
-    /// Ray `r` hits the triangle at `at` (of tile `arr`) at `t`, nearer than before.
+    /// Ray `r` hits triangle `hit` as `h`, nearer than before.
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn record(&mut self, r: usize, t: f32, u: f32, v: f32, at: u64, arr: u32, t_max: &mut [f32; WIDTH]) {
-        t_max[r] = t;
-        (self.u[r], self.v[r], self.arr[r]) = (u, v, arr);
-        (self.at_lo[r], self.at_hi[r]) = (at as u32, (at >> 32) as u32);
+    fn record(&mut self, r: usize, h: TriHit, hit: Taken, t_max: &mut [f32; WIDTH]) {
+        t_max[r] = h.t;
+        (self.u[r], self.v[r], self.arr[r]) = (h.u, h.v, hit.arr);
+        (self.at_lo[r], self.at_hi[r]) = (hit.at as u32, (hit.at >> 32) as u32);
     }
 }
