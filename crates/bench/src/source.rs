@@ -81,13 +81,13 @@ pub struct Loaded {
     tmp: Option<tempfile::TempDir>,
 }
 
-/// `scene` with every tile checked (and in 2 MiB pages where the kernel can, [`Scene::use_huge_pages`]), as the benchmark traces in core (its tracers then take
+/// `scene` with every tile checked (and in 2 MiB pages where the kernel can, [`Scene::reread_in_huge_pages`]), as the benchmark traces in core (its tracers then take
 /// the kernel that skips tile bookkeeping, [`Scene::all_tiles_checked`]); a corrupt tile is
 /// the scene's error.
 fn in_core(scene: Scene) -> Result<Arc<Scene>, BenchError> {
     // In 2 MiB pages where the kernel can (the check reads the file back into them); advice
     // only: a kernel that cannot leaves the scene as it was.
-    let _ = scene.use_huge_pages();
+    let _ = scene.reread_in_huge_pages();
     scene.verify_all()?;
     Ok(Arc::new(scene))
 }

@@ -515,8 +515,9 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             // so that its tracer skips the checks on the way (a faster kernel); a larger
             // one is checked tile by tile as rays first enter them.
             if scene.bytes().len() as u64 <= CHECK_AT_ONCE {
-                // In 2 MiB pages where the kernel can (advice: read back by the check).
-                let _ = scene.use_huge_pages();
+                // Pages read from now on in 2 MiB pages where the kernel can (advice; a
+                // file cached before is not read again: the render starts at once).
+                let _ = scene.advise_huge_pages();
                 scene.check_all_tiles();
             }
             Tracer::new(&scene)

@@ -403,7 +403,7 @@ impl Scene {
 
     /// Memory advice for the whole mapping: random access (no read-ahead around faults;
     /// a pager reads exactly the tiles it wants), and 4 KiB pages only (Linux: NOHUGEPAGE;
-    /// a file read before into 2 MiB folios, [`Scene::use_huge_pages`], would otherwise be
+    /// a file read before into 2 MiB folios, [`Scene::advise_huge_pages`], would otherwise be
     /// mapped 2 MiB at a fault, past what the pager counts).
     pub fn advise_random(&self) -> std::io::Result<()> {
         #[cfg(target_os = "linux")]
@@ -414,19 +414,29 @@ impl Scene {
     /// Asks for the mapping to be backed by 2 MiB pages where the kernel can, for a scene
     /// read whole and traced in core: with 4 KiB pages nearly every node visit of a large
     /// scene misses the TLB (a Zen 4's 3072 second-level entries cover 12 MiB). Linux maps a
-    /// file with 2 MiB pages only where its page cache holds 2 MiB folios, which it makes
-    /// when it reads the file into a mapping advised `HUGEPAGE`; so this advises the map,
-    /// then writes back and drops the file's pages from the page cache (`fdatasync`,
-    /// `posix_fadvise` DONTNEED; pages mapped already stay), and the next reads through the
-    /// map (such as [`Scene::check_all_tiles`]) bring it back in 2 MiB folios, from disk.
-    /// Measured on sphereflake:4 (207 MiB): +12% shadow, +16% diffuse rays per second.
-    /// Not for a paged scene: a fault would read 2 MiB where the pager wants one tile.
-    /// Advice only: where the kernel cannot, nothing changes. A no-op off Linux.
-    pub fn use_huge_pages(&self) -> std::io::Result<()> {
+    /// file with 2 MiB pages where its page cache holds 2 MiB folios, which it makes when it
+    /// reads the file into a mapping advised `HUGEPAGE` (madvise): pages read from now on
+    /// (such as by [`Scene::check_all_tiles`]) come so; pages cached before stay as they
+    /// were ([`Scene::reread_in_huge_pages`] reads them again). Not for a paged scene: a
+    /// fault would read 2 MiB where the pager wants one tile. Advice only: where the kernel
+    /// cannot, nothing changes. A no-op off Linux.
+    pub fn advise_huge_pages(&self) -> std::io::Result<()> {
+        #[cfg(target_os = "linux")]
+        self.map.advise(memmap2::Advice::HugePage)?;
+        Ok(())
+    }
+
+    /// [`Scene::advise_huge_pages`], and the file's pages cached before then written back
+    /// and dropped from the page cache (`fdatasync`, `posix_fadvise` DONTNEED; pages mapped
+    /// already stay), so that the next reads through the map bring the whole file back in
+    /// 2 MiB folios, from disk: for the benchmark, whose figures should not depend on how
+    /// the file was cached before. Measured on sphereflake:4 (207 MiB, 206 MiB then mapped
+    /// in 2 MiB pages): +2-8% diffuse, +2-3% shadow rays per second.
+    pub fn reread_in_huge_pages(&self) -> std::io::Result<()> {
+        self.advise_huge_pages()?;
         #[cfg(target_os = "linux")]
         {
             use std::os::fd::AsRawFd;
-            self.map.advise(memmap2::Advice::HugePage)?;
             let file = File::open(&self.path)?;
             // Dirty pages (a scene just written) cannot be dropped.
             file.sync_data()?;

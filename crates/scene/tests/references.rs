@@ -188,7 +188,7 @@ fn all_tiles_checked_counts_sound_tiles_only() {
     assert_eq!(e.kind, SceneErrorKind::CorruptTile(0), "{e}");
 }
 
-/// A scene advised to 2 MiB pages ([`Scene::use_huge_pages`]: written back and dropped from
+/// A scene advised to 2 MiB pages ([`Scene::reread_in_huge_pages`]: written back and dropped from
 /// the page cache, the advice given) reads back the same, whether the kernel makes them or
 /// not; the pager's advice (4 KiB pages, random access) is accepted after it.
 #[test]
@@ -197,7 +197,9 @@ fn huge_page_advice_keeps_the_scene_intact() {
     let good = good_scene(dir.path());
     let scene = Scene::open(&good).unwrap();
     let before = scene.bytes().to_vec();
-    scene.use_huge_pages().unwrap();
+    scene.advise_huge_pages().unwrap();
+    assert_eq!(scene.bytes(), &before[..]);
+    scene.reread_in_huge_pages().unwrap();
     assert!(scene.check_all_tiles());
     assert_eq!(scene.bytes(), &before[..]);
     scene.advise_random().unwrap();
