@@ -1253,11 +1253,11 @@ impl<'s> Tracer<'s> {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             let oct = RayBox::octant(ray);
-            // The generic kernel of the ray's dominant axis.
-            let generic = 8 + RayTri4::dominant(ray);
+            // The generic kernel of the ray's dominant axis (found only when it runs).
+            let generic = || 8 + RayTri4::dominant(ray);
             let kernel = match (self.octant_kernels, w.fresh) {
                 (Some(true), _) => oct,
-                (Some(false), _) => generic,
+                (Some(false), _) => generic(),
                 (None, true) => {
                     let (last, n) = *w.streak;
                     let n = if last as usize == oct { n.saturating_add(1) } else { 0 };
@@ -1265,11 +1265,11 @@ impl<'s> Tracer<'s> {
                     if n >= STREAK_MIN {
                         oct
                     } else {
-                        generic
+                        generic()
                     }
                 }
                 // A walk resumed after an event keeps to the generic kernel.
-                (None, false) => generic,
+                (None, false) => generic(),
             };
             // One of the kernels by its number, compiled for AVX2 or for AVX-512.
             macro_rules! kernel {
