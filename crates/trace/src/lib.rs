@@ -649,7 +649,7 @@ pub struct Tracer<'s> {
     /// nodes and links by node, triangle blocks by 16-byte unit of the same memory.
     nodes: &'s [Node8],
     /// The instruction set of the single-ray kernel (chosen once, at creation): the AVX2
-    /// kernel on AVX2 and AVX-512 machines, the baseline's otherwise.
+    /// kernel on AVX2 machines, its AVX-512 build on AVX-512 ones, the baseline's otherwise.
     isa: packet::Isa,
     /// Where traversals start: the top-level tree's root, or, when the scene has a single
     /// part, that part's root (the top level would only test the part's box again).
