@@ -406,8 +406,10 @@ impl Scene {
     /// a file read before into 2 MiB folios, [`Scene::advise_huge_pages`], would otherwise be
     /// mapped 2 MiB at a fault, past what the pager counts).
     pub fn advise_random(&self) -> std::io::Result<()> {
+        // (A kernel built without transparent huge pages refuses this advice, EINVAL, and
+        // has none to avoid: not an error.)
         #[cfg(target_os = "linux")]
-        self.map.advise(memmap2::Advice::NoHugePage)?;
+        let _ = self.map.advise(memmap2::Advice::NoHugePage);
         self.map.advise(memmap2::Advice::Random)
     }
 

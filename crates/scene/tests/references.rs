@@ -190,16 +190,21 @@ fn all_tiles_checked_counts_sound_tiles_only() {
 
 /// A scene advised to 2 MiB pages ([`Scene::reread_in_huge_pages`]: written back and dropped from
 /// the page cache, the advice given) reads back the same, whether the kernel makes them or
-/// not; the pager's advice (4 KiB pages, random access) is accepted after it.
+/// not; the pager's advice (4 KiB pages, random access) is accepted after it, on any kernel.
 #[test]
 fn huge_page_advice_keeps_the_scene_intact() {
     let dir = tempfile::tempdir().unwrap();
     let good = good_scene(dir.path());
     let scene = Scene::open(&good).unwrap();
     let before = scene.bytes().to_vec();
-    scene.advise_huge_pages().unwrap();
+    // A kernel without transparent huge pages refuses the advice (an error the callers
+    // ignore); where it has them, the advice and the re-read succeed.
+    let thp = Path::new("/sys/kernel/mm/transparent_hugepage/enabled").exists();
+    let advised = scene.advise_huge_pages();
+    assert!(advised.is_ok() || !thp, "{advised:?}");
     assert_eq!(scene.bytes(), &before[..]);
-    scene.reread_in_huge_pages().unwrap();
+    let reread = scene.reread_in_huge_pages();
+    assert!(reread.is_ok() || !thp, "{reread:?}");
     assert!(scene.check_all_tiles());
     assert_eq!(scene.bytes(), &before[..]);
     scene.advise_random().unwrap();
