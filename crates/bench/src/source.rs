@@ -81,7 +81,8 @@ pub struct Loaded {
     tmp: Option<tempfile::TempDir>,
 }
 
-/// `scene` with every tile checked (and in 2 MiB pages where the kernel can, [`Scene::reread_in_huge_pages`]), as the benchmark traces in core (its tracers then take
+/// `scene` with every tile checked (and in 2 MiB pages where the kernel can,
+/// [`Scene::reread_in_huge_pages`]), as the benchmark traces in core (its tracers then take
 /// the kernel that skips tile bookkeeping, [`Scene::all_tiles_checked`]); a corrupt tile is
 /// the scene's error.
 fn in_core(scene: Scene) -> Result<Arc<Scene>, BenchError> {

@@ -41,7 +41,6 @@
 //! ```
 
 use std::fs::File;
-use std::os::fd::AsRawFd;
 use std::sync::atomic::{fence, AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering::*};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
@@ -234,15 +233,9 @@ fn costs(scene: &Scene) -> (Vec<u64>, u64) {
     (tiles, sum(&scene.pinned_ranges()))
 }
 
-/// Drops `len` bytes of `file` at `off` (0: to the end) from the page cache
-/// (posix_fadvise DONTNEED); pages mapped by a process stay.
-pub fn drop_page_cache(file: &File, off: u64, len: u64) {
-    // SAFETY: posix_fadvise only takes integers and a file descriptor that `file` keeps
-    // open; it reads no memory of ours.
-    unsafe {
-        libc::posix_fadvise(file.as_raw_fd(), off as libc::off_t, len as libc::off_t, libc::POSIX_FADV_DONTNEED);
-    }
-}
+/// (The page cache's one `posix_fadvise` wrapper lives with the scene file, which uses it
+/// too; re-exported here, where the pager and its examples use it.)
+pub use megaray_scene::drop_page_cache;
 
 impl Pager {
     /// Starts paging `scene` within `opts.budget` bytes: the pinned tables are made resident

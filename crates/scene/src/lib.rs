@@ -32,6 +32,6 @@ pub mod writer;
 
 pub use error::{SceneError, SceneErrorKind};
 pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
-pub use reader::{CheckedTiles, Scene, Tile};
+pub use reader::{drop_page_cache, CheckedTiles, Scene, Tile};
 pub use stats::TreeStats;
 pub use writer::{BlobChild, BlobRef, MaterialDesc, PartBlob, SceneWriter, TileBlob};

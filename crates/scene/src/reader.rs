@@ -13,6 +13,18 @@ use crate::error::{SceneError, SceneErrorKind};
 use crate::format::*;
 use crate::writer::{decode_materials, MaterialDesc};
 
+/// Drops `len` bytes of `file` at `off` (0: to the end) from the page cache
+/// (posix_fadvise DONTNEED); pages mapped by a process stay. Advice: its outcome is not
+/// reported. (The project's one wrapper: [`Scene::reread_in_huge_pages`] and the pager use it.)
+pub fn drop_page_cache(file: &File, off: u64, len: u64) {
+    use std::os::fd::AsRawFd;
+    // SAFETY: posix_fadvise only takes integers and a file descriptor that `file` keeps
+    // open; it reads no memory of ours.
+    unsafe {
+        libc::posix_fadvise(file.as_raw_fd(), off as libc::off_t, len as libc::off_t, libc::POSIX_FADV_DONTNEED);
+    }
+}
+
 const TILE_UNCHECKED: u8 = 0;
 const TILE_OK: u8 = 1;
 
@@ -438,16 +450,10 @@ impl Scene {
         self.advise_huge_pages()?;
         #[cfg(target_os = "linux")]
         {
-            use std::os::fd::AsRawFd;
             let file = File::open(&self.path)?;
             // Dirty pages (a scene just written) cannot be dropped.
             file.sync_data()?;
-            // SAFETY: posix_fadvise only takes integers and a file descriptor that `file`
-            // keeps open; it reads no memory of ours.
-            let r = unsafe { libc::posix_fadvise(file.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED) };
-            if r != 0 {
-                return Err(std::io::Error::from_raw_os_error(r));
-            }
+            drop_page_cache(&file, 0, 0);
         }
         Ok(())
     }
