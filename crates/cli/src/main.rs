@@ -107,6 +107,10 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     let bars = progress::Bars::new(cli.quiet);
+    if let Err(e) = megaray_trace::packet::Isa::from_env() {
+        eprintln!("megaray: error: {e}");
+        std::process::exit(1);
+    }
     let res = match cli.cmd {
         Command::Gen(a) => cmd::gen(a, &bars),
         Command::Build(a) => cmd::build(a, &bars),

@@ -216,3 +216,13 @@ fn bad_lighting_inputs_fail_cleanly() {
     fails(&["gen", "sky:width=64", "-o", "/nonexistent-dir/sky.hdr"], &["sky.hdr", "cannot write"]);
     assert!(!out.exists(), "no image is written after a bad option");
 }
+
+#[test]
+fn an_unknown_instruction_set_is_a_clear_error() {
+    let out = std::process::Command::new(bin()).args(["info", "grid:4"]).env("MEGARAY_ISA", "neon").output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.starts_with("megaray: error: MEGARAY_ISA: unknown instruction set \"neon\""), "{err}");
+}

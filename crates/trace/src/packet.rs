@@ -27,6 +27,9 @@ pub enum Isa {
     Avx512,
 }
 
+/// The environment variable that caps the kernels' instruction set ([`Isa::from_env`]).
+pub const ISA_VAR: &str = "MEGARAY_ISA";
+
 /// What the AVX-512 kernels need: the foundation, 256-bit forms with 32 registers (VL), and
 /// AVX2 and FMA beside them.
 #[cfg(target_arch = "x86_64")]
@@ -38,21 +41,57 @@ fn avx512() -> bool {
 }
 
 impl Isa {
-    /// The best instruction set this machine has (decided once, then cached).
+    /// The instruction set the kernels run on: the best this machine has, or the one the
+    /// environment variable [`ISA_VAR`] names if this machine has it (decided once, then
+    /// cached; see [`Isa::from_env`]).
     pub fn detect() -> Isa {
         static ISA: OnceLock<Isa> = OnceLock::new();
-        *ISA.get_or_init(|| {
-            #[cfg(target_arch = "x86_64")]
-            {
-                if avx512() {
-                    return Isa::Avx512;
-                }
-                if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                    return Isa::Avx2;
-                }
-            }
-            Isa::Baseline
+        *ISA.get_or_init(|| match Isa::from_env() {
+            Ok(Some(isa)) => isa,
+            _ => Isa::best(),
         })
+    }
+
+    /// The instruction set the environment variable [`ISA_VAR`] asks for (`avx512`, `avx2`
+    /// or `baseline`, as Embree's `isa=` setting caps its own): `None` when unset or empty,
+    /// an error naming the value when it is unknown or not available on this machine.
+    /// (Front ends check it at start; [`Isa::detect`] ignores a bad value.)
+    pub fn from_env() -> Result<Option<Isa>, String> {
+        match std::env::var_os(ISA_VAR) {
+            Some(v) if !v.is_empty() => {
+                Isa::parse(&v.to_string_lossy()).map(Some).map_err(|e| format!("{ISA_VAR}: {e}"))
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// The instruction set named `s` (`avx512`, `avx2` or `baseline`; `sse2` and `scalar`
+    /// name the baseline too), if this machine can run it; else why not, in one line.
+    pub fn parse(s: &str) -> Result<Isa, String> {
+        let isa = match s.trim().to_ascii_lowercase().as_str() {
+            "avx512" | "avx-512" => Isa::Avx512,
+            "avx2" => Isa::Avx2,
+            "baseline" | "sse2" | "scalar" => Isa::Baseline,
+            _ => return Err(format!("unknown instruction set {s:?} (use avx512, avx2 or baseline)")),
+        };
+        match Isa::available().contains(&isa) {
+            true => Ok(isa),
+            false => Err(format!("this machine cannot run {isa:?} (it has {:?})", Isa::available())),
+        }
+    }
+
+    /// The best instruction set this machine has.
+    fn best() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if avx512() {
+                return Isa::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Baseline
     }
 
     /// Every instruction set this machine can run (the tests compare them all); detected once.
@@ -620,5 +659,24 @@ impl Found16 {
         t_max[r] = h.t;
         (self.u[r], self.v[r], self.arr[r]) = (h.u, h.v, hit.arr);
         (self.at_lo[r], self.at_hi[r]) = (hit.at as u32, (hit.at >> 32) as u32);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn isa_names_parse_to_what_this_machine_has() {
+        assert_eq!(Isa::parse("baseline"), Ok(Isa::Baseline));
+        assert_eq!(Isa::parse(" Scalar "), Ok(Isa::Baseline));
+        for (name, isa) in [("avx2", Isa::Avx2), ("AVX512", Isa::Avx512)] {
+            match Isa::available().contains(&isa) {
+                true => assert_eq!(Isa::parse(name), Ok(isa)),
+                false => assert!(Isa::parse(name).unwrap_err().contains("cannot run"), "{name}"),
+            }
+        }
+        let e = Isa::parse("neon").unwrap_err();
+        assert!(e.contains("\"neon\"") && e.contains("avx512, avx2 or baseline"), "{e}");
     }
 }
