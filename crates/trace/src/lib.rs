@@ -900,6 +900,33 @@ impl<'s> Tracer<'s> {
         units[s..s + 9].try_into().expect("nine units")
     }
 
+    /// [`Tracer::block_at`] without its bounds check, for the hot loop ([`Tracer::walk`]):
+    /// `unit` must be a block of a leaf reference read from a checked tile.
+    #[inline(always)]
+    fn walk_block_at(&self, unit: u64) -> &'s Block {
+        let s = unit as usize;
+        debug_assert!((s + 9) * 16 <= std::mem::size_of_val(self.nodes), "block {s} beyond the file");
+        // SAFETY: the walk reads blocks only through leaf references of checked tiles (or of
+        // a tile entered through `Tracer::enter`, which checks it), and `Scene::check_tile`
+        // verified that all blocks of each such leaf lie inside its tile, which
+        // `Scene::open` verified to lie inside the file, all of which `nodes` covers (but a
+        // tail shorter than a node, which no tile reaches into: tiles end on pages). A
+        // `Block` is nine `[f32; 4]` units: the pointer is aligned for it.
+        unsafe { &*(self.nodes.as_ptr().cast::<[f32; 4]>().add(s).cast::<Block>()) }
+    }
+
+    /// The node at position `node` without a bounds check, for the hot loop
+    /// ([`Tracer::walk`]): `node` must come from a checked reference.
+    #[inline(always)]
+    fn walk_node_at(&self, node: u64) -> &'s Node8 {
+        debug_assert!((node as usize) < self.nodes.len(), "node {node} beyond the file");
+        // SAFETY: the walk follows only references of checked tiles (`Scene::check_tile`:
+        // inner nodes and links point at nodes inside their tiles), of the top-level tree
+        // and the root (both checked by `Scene::open`), and `Scene::open` verified every tile
+        // to lie inside the file, which `nodes` covers. (A debug build asserts it.)
+        unsafe { self.nodes.get_unchecked(node as usize) }
+    }
+
     /// The closest hit of `ray` in `[ray.t_min, ray.t_max)`. On a paged tracer this waits
     /// for missing tiles (use [`Tracer::try_intersect`] not to).
     #[inline]
@@ -1341,11 +1368,11 @@ impl<'s> Tracer<'s> {
         #[cfg(target_arch = "x86_64")]
         if AVX && left > 4 {
             stats::count(|s| s.blocks += 2);
-            let (b0, b1) = (self.block_at(unit), self.block_at(unit + 9));
+            let (b0, b1) = (self.walk_block_at(unit), self.walk_block_at(unit + 9));
             return (rt.try_test8::<ANY>(sp, b0, b1, lanes8(left), t_max), 2);
         }
         stats::count(|s| s.blocks += 1);
-        (rt.try_test(sp, self.block_at(unit), lanes(left), t_max), 1)
+        (rt.try_test(sp, self.walk_block_at(unit), lanes(left), t_max), 1)
     }
 
     /// The hot loop of the single-ray kernel. Near-first: of the children a node's box test
@@ -1503,8 +1530,8 @@ impl<'s> Tracer<'s> {
                     next = Some(Entry { r, arr: c, t: f32::NEG_INFINITY });
                     break 'walk Event::Full;
                 }
-                // In range: node positions were checked with the tile (`Scene::check_tile`).
-                let node = &self.nodes[node as usize];
+                // Read without a bounds check: node positions were checked with the tile.
+                let node = self.walk_node_at(node);
                 let arr = c;
                 stats::count(|s| s.nodes += 1);
                 let (dist, mask) = rb.test::<AVX>(node, t_min, t_wide);
