@@ -1532,6 +1532,14 @@ impl<'s> Tracer<'s> {
                 }
                 // Read without a bounds check: node positions were checked with the tile.
                 let node = self.walk_node_at(node);
+                // The node's last line (its child references, which the box test does not
+                // read) asked for with the boxes, not after the test has picked a child: a
+                // second miss in a row on a node not in cache. bench/ab.sh, 6-8 rounds on an
+                // Intel Xeon (2 MiB L2 per core): shadow +6-7% and diffuse +3-5% on
+                // sphereflake:4@close, grid:1000 and stanford-bunny@close (an earlier session
+                // had measured it neutral on an AMD Zen 4).
+                let refs = std::mem::offset_of!(Node8, child);
+                megaray_base::prefetch_addr((node as *const Node8 as *const u8).wrapping_add(refs));
                 let arr = c;
                 stats::count(|s| s.nodes += 1);
                 let (dist, mask) = rb.test::<AVX>(node, t_min, t_wide);
