@@ -8,7 +8,7 @@
 #
 # A and B default to target/release/megaray; SA and SB, when set, replace SCENE for that side.
 # Each side runs `megaray bench SCENE --threads 1 --reps 3 --json ARGS`. Prints, per ray kind,
-# the median Mrays/s of each side and the median of the per-round ratios B/A (with every round's).
+# the median Mrays/s (Mtris/s for build kinds) of each side and the median of the per-round ratios B/A (with every round's).
 # Needs two cores and taskset (util-linux).
 set -e
 [ $# -ge 2 ] || { sed -n '2,12p' "$0"; exit 2; }
@@ -35,8 +35,10 @@ for side in "AB":
         for line in open(f"{tmp}/{side}.{i}"):
             if line.startswith("{"):
                 r = json.loads(line)
-                if "mrays_s" in r:
-                    figs.setdefault((r["kind"], side), []).append(r["mrays_s"])
+                # Rays per second, or triangles per second for the build kinds.
+                fig = r.get("mrays_s", r.get("mtris_s"))
+                if fig is not None:
+                    figs.setdefault((r["kind"], side), []).append(fig)
 for kind in sorted({k for k, _ in figs}):
     a, b = figs.get((kind, "A"), []), figs.get((kind, "B"), [])
     if not a or len(a) != len(b):

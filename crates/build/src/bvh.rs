@@ -487,21 +487,14 @@ impl<const NB: usize> Bins<NB> {
         self
     }
 
-    /// Bins `refs`, alternating between `SETS` bin sets (2 for large nodes, so that neighbours
-    /// falling into the same bin do not wait on each other's stores).
-    /// With `only` < 3, only that axis's bins are filled (the others stay empty).
-    fn gather<const SETS: usize>(refs: &[PrimRef], cmin: Vec4, scale: Vec4, only: usize) -> Self {
+    /// Bins `refs` on all three axes, alternating between `SETS` bin sets (2 for large
+    /// nodes, so that neighbours falling into the same bin do not wait on each other's
+    /// stores).
+    fn gather<const SETS: usize>(refs: &[PrimRef], cmin: Vec4, scale: Vec4) -> Self {
         let mut sets: [Bins<NB>; SETS] = std::array::from_fn(|_| Bins::empty());
         let mut add = |j: usize, r: &PrimRef| {
             let bi = bins_of(r, cmin, scale, NB);
             let b = &mut sets[j];
-            if only < 3 {
-                let (k, i) = (only, bi[only]);
-                b.cnt[k][i] += 1;
-                b.lo[k][i] = b.lo[k][i].min(r.lo);
-                b.hi[k][i] = b.hi[k][i].max(r.hi);
-                return;
-            }
             for (k, &i) in bi.iter().enumerate() {
                 b.cnt[k][i] += 1;
                 b.lo[k][i] = b.lo[k][i].min(r.lo);
@@ -543,46 +536,92 @@ fn find_split<const NB: usize, const SETS: usize, const LONGEST: bool>(
     } else {
         2
     };
-    let only = if LONGEST { longest } else { 3 };
+    if LONGEST {
+        // One axis: only its bins are made (a small node's bins cost as much to clear as
+        // its primitives to bin).
+        if scale[longest] == 0.0 {
+            return (f32::INFINITY, 0, 0);
+        }
+        let b = match longest {
+            0 => AxisBins::<NB>::gather::<0>(refs, cmin, scale),
+            1 => AxisBins::<NB>::gather::<1>(refs, cmin, scale),
+            _ => AxisBins::<NB>::gather::<2>(refs, cmin, scale),
+        };
+        let (cost, s) = sweep(&b.cnt, &b.lo, &b.hi);
+        return (cost, longest, s);
+    }
     let bins = if parallel && refs.len() >= 1 << 17 {
         use rayon::prelude::*;
         refs.par_chunks(1 << 15)
-            .map(|c| Bins::<NB>::gather::<SETS>(c, cmin, scale, only))
+            .map(|c| Bins::<NB>::gather::<SETS>(c, cmin, scale))
             .reduce(Bins::empty, |a, b| a.merge(&b))
     } else {
-        Bins::<NB>::gather::<SETS>(refs, cmin, scale, only)
+        Bins::<NB>::gather::<SETS>(refs, cmin, scale)
     };
-    let (cnt, blo, bhi) = (&bins.cnt, &bins.lo, &bins.hi);
     let mut best = (f32::INFINITY, 0usize, 0usize);
     for axis in 0..3 {
-        if scale[axis] == 0.0 || (LONGEST && axis != longest) {
+        if scale[axis] == 0.0 {
             continue;
         }
-        let mut right_area = [0f32; NB];
-        let mut right_cnt = [0u32; NB];
-        let (mut lo, mut hi, mut ac) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
-        for b in (1..NB).rev() {
-            lo = lo.min(blo[axis][b]);
-            hi = hi.max(bhi[axis][b]);
-            ac += cnt[axis][b];
-            right_area[b] = half_area(lo, hi);
-            right_cnt[b] = ac;
-        }
-        let (mut lo, mut hi, mut ac) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
-        for s in 1..NB {
-            lo = lo.min(blo[axis][s - 1]);
-            hi = hi.max(bhi[axis][s - 1]);
-            ac += cnt[axis][s - 1];
-            if ac == 0 || right_cnt[s] == 0 {
-                continue;
-            }
-            let cost = half_area(lo, hi) * blocks(ac) + right_area[s] * blocks(right_cnt[s]);
-            if cost < best.0 {
-                best = (cost, axis, s);
-            }
+        let (cost, s) = sweep(&bins.cnt[axis], &bins.lo[axis], &bins.hi[axis]);
+        if cost < best.0 {
+            best = (cost, axis, s);
         }
     }
     best
+}
+
+/// The cheapest split of one axis's bins: (SAH cost, first bin of the right side), the cost
+/// infinite when no split separates anything.
+#[inline(always)]
+fn sweep<const NB: usize>(cnt: &[u32; NB], blo: &[Vec4; NB], bhi: &[Vec4; NB]) -> (f32, usize) {
+    let mut right_area = [0f32; NB];
+    let mut right_cnt = [0u32; NB];
+    let (mut lo, mut hi, mut ac) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
+    for b in (1..NB).rev() {
+        lo = lo.min(blo[b]);
+        hi = hi.max(bhi[b]);
+        ac += cnt[b];
+        right_area[b] = half_area(lo, hi);
+        right_cnt[b] = ac;
+    }
+    let mut best = (f32::INFINITY, 0usize);
+    let (mut lo, mut hi, mut ac) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
+    for s in 1..NB {
+        lo = lo.min(blo[s - 1]);
+        hi = hi.max(bhi[s - 1]);
+        ac += cnt[s - 1];
+        if ac == 0 || right_cnt[s] == 0 {
+            continue;
+        }
+        let cost = half_area(lo, hi) * blocks(ac) + right_area[s] * blocks(right_cnt[s]);
+        if cost < best.0 {
+            best = (cost, s);
+        }
+    }
+    best
+}
+
+/// The bins of one axis, `A`: what [`find_split`] fills for small nodes.
+struct AxisBins<const NB: usize> {
+    cnt: [u32; NB],
+    lo: [Vec4; NB],
+    hi: [Vec4; NB],
+}
+
+impl<const NB: usize> AxisBins<NB> {
+    /// Bins `refs` on axis `A` ([`bin_on`]: the bins the partition will use).
+    #[inline(always)]
+    fn gather<const A: usize>(refs: &[PrimRef], cmin: Vec4, scale: Vec4) -> Self {
+        let mut b = AxisBins { cnt: [0; NB], lo: [Vec4::INFINITY; NB], hi: [Vec4::NEG_INFINITY; NB] };
+        for r in refs {
+            let i = bin_on::<A>(r, cmin, scale, NB);
+            b.cnt[i] += 1;
+            b.lo[i] = b.lo[i].min(r.lo);
+            b.hi[i] = b.hi[i].max(r.hi);
+        }
+        b
+    }
 }
 
 /// In-place partition; returns the number of elements for which `pred` holds (they come
