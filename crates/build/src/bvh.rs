@@ -575,26 +575,33 @@ fn find_split<const NB: usize, const SETS: usize, const LONGEST: bool>(
 /// infinite when no split separates anything.
 #[inline(always)]
 fn sweep<const NB: usize>(cnt: &[u32; NB], blo: &[Vec4; NB], bhi: &[Vec4; NB]) -> (f32, usize) {
-    let mut right_area = [0f32; NB];
-    let mut right_cnt = [0u32; NB];
-    let (mut lo, mut hi, mut ac) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
-    for b in (1..NB).rev() {
-        lo = lo.min(blo[b]);
-        hi = hi.max(bhi[b]);
-        ac += cnt[b];
-        right_area[b] = half_area(lo, hi);
-        right_cnt[b] = ac;
+    // The boxes and counts left and right of each split, grown from both ends in one loop:
+    // the two chains of `min`s and `max`s (which a small node's split waits on) overlap.
+    let (mut left_area, mut left_cnt) = ([0f32; NB], [0u32; NB]);
+    let (mut right_area, mut right_cnt) = ([0f32; NB], [0u32; NB]);
+    let (mut llo, mut lhi, mut lc) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
+    let (mut rlo, mut rhi, mut rc) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
+    for i in 1..NB {
+        // Split `i`'s left side: bins `..i`.
+        llo = llo.min(blo[i - 1]);
+        lhi = lhi.max(bhi[i - 1]);
+        lc += cnt[i - 1];
+        left_area[i] = half_area(llo, lhi);
+        left_cnt[i] = lc;
+        // Split `NB - i`'s right side: bins `NB - i..`.
+        let b = NB - i;
+        rlo = rlo.min(blo[b]);
+        rhi = rhi.max(bhi[b]);
+        rc += cnt[b];
+        right_area[b] = half_area(rlo, rhi);
+        right_cnt[b] = rc;
     }
     let mut best = (f32::INFINITY, 0usize);
-    let (mut lo, mut hi, mut ac) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);
     for s in 1..NB {
-        lo = lo.min(blo[s - 1]);
-        hi = hi.max(bhi[s - 1]);
-        ac += cnt[s - 1];
-        if ac == 0 || right_cnt[s] == 0 {
+        if left_cnt[s] == 0 || right_cnt[s] == 0 {
             continue;
         }
-        let cost = half_area(lo, hi) * blocks(ac) + right_area[s] * blocks(right_cnt[s]);
+        let cost = left_area[s] * blocks(left_cnt[s]) + right_area[s] * blocks(right_cnt[s]);
         if cost < best.0 {
             best = (cost, s);
         }
