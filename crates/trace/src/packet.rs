@@ -27,7 +27,7 @@ pub enum Isa {
     Avx512,
 }
 
-/// The environment variable that caps the kernels' instruction set ([`Isa::from_env`]).
+/// The environment variable that chooses the kernels' instruction set ([`Isa::from_env`]).
 pub const ISA_VAR: &str = "MEGARAY_ISA";
 
 /// What the AVX-512 kernels need: the foundation, 256-bit forms with 32 registers (VL), and
@@ -53,7 +53,7 @@ impl Isa {
     }
 
     /// The instruction set the environment variable [`ISA_VAR`] asks for (`avx512`, `avx2`
-    /// or `baseline`, as Embree's `isa=` setting caps its own): `None` when unset or empty,
+    /// or `baseline`, as Embree's `isa=` setting chooses its own): `None` when unset or empty,
     /// an error naming the value when it is unknown or not available on this machine.
     /// (Front ends check it at start; [`Isa::detect`] ignores a bad value.)
     pub fn from_env() -> Result<Option<Isa>, String> {
@@ -80,18 +80,9 @@ impl Isa {
         }
     }
 
-    /// The best instruction set this machine has.
+    /// The best instruction set this machine has (the last of [`Isa::available`]).
     fn best() -> Isa {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if avx512() {
-                return Isa::Avx512;
-            }
-            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Baseline
+        *Isa::available().last().expect("the baseline is always available")
     }
 
     /// Every instruction set this machine can run (the tests compare them all); detected once.
