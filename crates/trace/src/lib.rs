@@ -109,8 +109,10 @@ const BOX_EPS: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::
 const FAR_EPS: f32 = 1.0 + 8.0 * f32::EPSILON;
 const _: () = assert!(FAR_EPS > BOX_EPS);
 
-/// A traversal stack entry: something to visit, and the entry distance of its box.
+/// A traversal stack entry: something to visit, and the entry distance of its box. Aligned
+/// to its size, so that no entry of the stack straddles two cache lines.
 #[derive(Clone, Copy, Debug)]
+#[repr(C, align(16))]
 struct Entry {
     /// A [`ChildRef`]: an inner node or a leaf of node array `arr`, a link, or a part.
     r: u64,
@@ -120,6 +122,8 @@ struct Entry {
     /// Entry distance of its box along the ray.
     t: f32,
 }
+
+const _: () = assert!(std::mem::size_of::<Entry>() == 16);
 
 impl Entry {
     /// All zero bits: what unused stack slots hold (cheapest to initialise).
@@ -237,7 +241,7 @@ impl RayBox {
     /// the exits are here; with `AVX`, by [`RayBox::test_avx2`] (which the caller must only
     /// ask for in code compiled for AVX2).
     #[inline(always)]
-    fn test<const AVX: bool>(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
+    fn test<const AVX: bool>(&self, n: &Node8, t0: f32, t1: f32) -> (Near, u32) {
         #[cfg(target_arch = "x86_64")]
         if AVX {
             // SAFETY: `AVX` box tests are only instantiated inside `Tracer::walk_avx2`, which
@@ -254,7 +258,7 @@ impl RayBox {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    fn test_avx2(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
+    fn test_avx2(&self, n: &Node8, t0: f32, t1: f32) -> (Near, u32) {
         use std::arch::x86_64::*;
         let base = (n as *const Node8).cast::<u8>();
         // SAFETY: every offset in `rows` is that of one of the node's rows of eight f32s (set
@@ -270,15 +274,15 @@ impl RayBox {
         // Exits come widened ([`FAR_EPS`]): no multiply after the reduction.
         let tf = _mm256_min_ps(_mm256_min_ps(q(0, 1), q(1, 1)), _mm256_min_ps(q(2, 1), _mm256_set1_ps(t1)));
         let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
-        let mut near = [0f32; W];
-        // SAFETY: `near` has room for eight f32s.
-        unsafe { _mm256_storeu_ps(near.as_mut_ptr(), tn) };
+        let mut near = Near([0.0; W]);
+        // SAFETY: `near` has room for eight f32s, aligned to 32 bytes.
+        unsafe { _mm256_store_ps(near.0.as_mut_ptr(), tn) };
         (near, mask)
     }
 
     /// The box test as two 4-wide SSE halves (the baseline of x86-64, and the reference).
     #[inline(always)]
-    fn test_sse(&self, n: &Node8, t0: f32, t1: f32) -> ([f32; W], u32) {
+    fn test_sse(&self, n: &Node8, t0: f32, t1: f32) -> (Near, u32) {
         let planes = n.planes();
         // `& 7`: in range by construction, and the compiler sees it.
         let row = |k: usize, far: usize| &planes[(self.rows[3 * far + k] / 32) & 7];
@@ -299,12 +303,18 @@ impl RayBox {
         };
         let (n0, m0) = half(0);
         let (n1, m1) = half(1);
-        let mut near = [0f32; W];
-        near[..4].copy_from_slice(&n0.to_array());
-        near[4..].copy_from_slice(&n1.to_array());
+        let mut near = Near([0.0; W]);
+        near.0[..4].copy_from_slice(&n0.to_array());
+        near.0[4..].copy_from_slice(&n1.to_array());
         (near, m0 | (m1 << 4))
     }
 }
+
+/// The entry distances of a node's eight slots ([`RayBox::test`]), aligned to their size, so
+/// that the box test's one 32-byte store of them never straddles two cache lines.
+#[derive(Clone, Copy)]
+#[repr(C, align(32))]
+struct Near([f32; W]);
 
 /// `min` as `minps` computes it (the second operand when either is NaN), so that loops of it
 /// vectorize.
@@ -1547,7 +1557,8 @@ impl<'s> Tracer<'s> {
                     continue 'walk;
                 }
                 // (An any-hit query reads no entry distance: none is kept.)
-                let at = |k: u32| Entry { r: node.child[k as usize], arr, t: if ANY { 0.0 } else { dist[k as usize] } };
+                let at =
+                    |k: u32| Entry { r: node.child[k as usize], arr, t: if ANY { 0.0 } else { dist.0[k as usize] } };
                 let mut push = |x: Entry| {
                     self.prefetch(x.r);
                     w.fixed[sp % STACK] = x;
