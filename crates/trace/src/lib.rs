@@ -158,8 +158,20 @@ struct RayBox {
     /// Byte offsets in a [`Node8`] of the rows ([`Node8::planes`]) of the near planes of x, y
     /// and z, then of the far planes: `32 * row`, the row of a far plane being the other one
     /// of its pair. Always one of 0, 32, .., 160 (the AVX test reads through them unchecked).
-    rows: [usize; 6],
+    rows: &'static [usize; 6],
 }
+
+/// [`RayBox::rows`] of each octant, so that a new ray looks its rows up rather than making
+/// them (and its walk reads them from here, not from copies on the machine stack).
+const ROWS: [[usize; 6]; 8] = {
+    let mut t = [[0; 6]; 8];
+    let mut oct = 0;
+    while oct < 8 {
+        t[oct] = RayBox::rows(oct);
+        oct += 1;
+    }
+    t
+};
 
 impl RayBox {
     #[inline(always)]
@@ -171,7 +183,7 @@ impl RayBox {
         let fixed = d.abs().max(Vec3A::splat(1e-20)).copysign(d);
         let inv = Vec3A::ONE / fixed;
         let inv_far = (inv * FAR_EPS).to_array();
-        RayBox { org: r.org.into(), inv: inv.to_array(), inv_far, rows: RayBox::rows(RayBox::octant(r)) }
+        RayBox { org: r.org.into(), inv: inv.to_array(), inv_far, rows: &ROWS[RayBox::octant(r)] }
     }
 
     /// The ray's octant: bit `k` set when the direction's component `k` is negative (its
@@ -1412,7 +1424,7 @@ impl<'s> Tracer<'s> {
         let mut rb = RayBox::new(ray);
         if OCT < 8 {
             // The ray's octant (`walk_on` chose this kernel by it), as a constant.
-            rb.rows = RayBox::rows(OCT);
+            rb.rows = &ROWS[OCT];
         }
         let t_min = ray.t_min;
         if w.fresh {
