@@ -233,7 +233,7 @@ impl RayBox {
     fn splats<const AVX: bool>(&self, t_min: f32) -> Splats {
         #[cfg(target_arch = "x86_64")]
         if AVX {
-            // SAFETY: as in `RayBox::test`: only instantiated inside `Tracer::walk_avx2`.
+            // SAFETY: as in `RayBox::test`: only instantiated inside `walk_avx2`.
             return unsafe { self.splats_avx2(t_min) };
         }
         Splats { o: self.org.map(Vec4::splat), t_min: Vec4::splat(t_min) }
@@ -256,7 +256,7 @@ impl RayBox {
     fn test<const AVX: bool>(&self, n: &Node8, t0: f32, t1: f32) -> (Near, u32) {
         #[cfg(target_arch = "x86_64")]
         if AVX {
-            // SAFETY: `AVX` box tests are only instantiated inside `Tracer::walk_avx2`, which
+            // SAFETY: `AVX` box tests are only instantiated inside `walk_avx2`, which
             // runs only on CPUs with AVX2 and FMA (`Tracer::traverse`).
             return unsafe { self.test_avx2(n, t0, t1) };
         }
@@ -468,7 +468,7 @@ impl RayTri4 {
     /// [`RayTri4::try_test`] of two blocks at once (`b0` in lanes 0..4, `b1` in lanes 4..8
     /// of `lanes`), as one 8-wide AVX pass: for leaves of two blocks, which then cost little
     /// more than one. The caller must only ask for it in code compiled for AVX2
-    /// ([`Tracer::walk_avx2`]). Lane for lane the operations of [`RayTri4::test_k`], so the
+    /// ([`walk_avx2`]). Lane for lane the operations of [`RayTri4::test_k`], so the
     /// same results.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
@@ -690,7 +690,20 @@ pub struct Tracer<'s> {
     /// ([`Tracer::walk_on`]), `Some(true)` always the octant ones, `Some(false)` always the
     /// generic one (for tests).
     octant_kernels: Option<bool>,
+    /// The single-ray kernels of this tracer's instruction set and tile bookkeeping
+    /// ([`Tracer::kernel_table`]), by query kind (`[closest, any]`) and kernel number
+    /// ([`Tracer::walk_on`]): chosen once, so that a ray's walk starts with one indirect
+    /// call, not a test of each setting and a jump through a table.
+    kernels: [[Kernel; KERNELS]; 2],
 }
+
+/// A single-ray kernel: [`Tracer::walk`] compiled for one instruction set, query kind, tile
+/// bookkeeping and kernel number. Unsafe: the AVX ones must only run where the CPU has the
+/// instructions, which [`Tracer::kernel_table`] sees to.
+type Kernel = for<'a, 'b, 'c, 'd> unsafe fn(&'a Tracer<'b>, &'c mut Walk<'d>, &Ray) -> Event;
+
+/// Kernels per query kind: eight octant ones and three generic ones ([`Tracer::walk_on`]).
+const KERNELS: usize = 11;
 
 /// A ray whose traversal stopped at a tile that is not resident: its stack and best hit so
 /// far. Resume it with [`Tracer::resume`] once [`Pending::tile`] has arrived.
@@ -734,6 +747,7 @@ impl<'s> Tracer<'s> {
             checked: scene.checked_tiles(),
             all_checked: scene.all_tiles_checked(),
             octant_kernels: None,
+            kernels: Tracer::kernel_table(packet::Isa::detect(), scene.all_tiles_checked()),
             root: match scene.parts() {
                 // The part's root, as the top-level tree links to it (in range: checked by
                 // `Scene::open`).
@@ -751,6 +765,7 @@ impl<'s> Tracer<'s> {
     pub fn with_isa(mut self, isa: packet::Isa) -> Tracer<'s> {
         assert!(packet::Isa::available().contains(&isa), "{isa:?} is not available on this machine");
         self.isa = isa;
+        self.kernels = Tracer::kernel_table(isa, self.all_checked);
         self
     }
 
@@ -768,6 +783,7 @@ impl<'s> Tracer<'s> {
     #[doc(hidden)]
     pub fn with_tile_checks(mut self) -> Tracer<'s> {
         self.all_checked = false;
+        self.kernels = Tracer::kernel_table(self.isa, false);
         self
     }
 
@@ -780,7 +796,12 @@ impl<'s> Tracer<'s> {
     /// A tracer that reads only the tiles `pager` has made resident.
     pub fn paged(pager: &'s Pager) -> Tracer<'s> {
         let scene: &'s Scene = pager.scene();
-        Tracer { pager: Some(pager), checked: CheckedTiles::NONE, all_checked: false, ..Tracer::new(scene) }
+        Tracer::new(scene).with_tile_checks().with_pager(pager)
+    }
+
+    /// This tracer reading through `pager` ([`Tracer::paged`]).
+    fn with_pager(self, pager: &'s Pager) -> Tracer<'s> {
+        Tracer { pager: Some(pager), checked: CheckedTiles::NONE, ..self }
     }
 
     /// The pager, for a paged tracer.
@@ -1077,7 +1098,7 @@ impl<'s> Tracer<'s> {
         #[cfg(target_arch = "x86_64")]
         match self.isa {
             // `isa` is one that the CPU reported (`Isa::detect`, `Isa::available`). The
-            // same kernel on both, compiled for each ([`Tracer::walk_avx512`]).
+            // same kernel on both, compiled for each ([`walk_avx512`]).
             packet::Isa::Avx2 | packet::Isa::Avx512 => {
                 return match any {
                     true => self.traverse_in::<true, true>(ray, from, pad),
@@ -1290,21 +1311,14 @@ impl<'s> Tracer<'s> {
     /// same hits (tested).
     #[inline(always)]
     fn walk_on<const AVX: bool, const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        match self.all_checked {
-            true => self.walk_on_k::<AVX, ANY, true>(w, ray),
-            false => self.walk_on_k::<AVX, ANY, false>(w, ray),
-        }
-    }
-
-    /// [`Tracer::walk_on`] for the tracer's `ALL` ([`Tracer::all_checked`]).
-    #[inline(always)]
-    fn walk_on_k<const AVX: bool, const ANY: bool, const ALL: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        #[cfg(target_arch = "x86_64")]
+        // The kernel's number: an octant's (0..8) or a generic one's (8 + the dominant axis).
+        // (The baseline's table holds the same kernel under every number.)
+        let mut kernel = 0;
         if AVX {
             let oct = RayBox::octant(ray);
             // The generic kernel of the ray's dominant axis (found only when it runs).
             let generic = || 8 + RayTri4::dominant(ray);
-            let kernel = match (self.octant_kernels, w.fresh) {
+            kernel = match (self.octant_kernels, w.fresh) {
                 (Some(true), _) => oct,
                 (Some(false), _) => generic(),
                 (None, true) => {
@@ -1320,59 +1334,50 @@ impl<'s> Tracer<'s> {
                 // A walk resumed after an event keeps to the generic kernel.
                 (None, false) => generic(),
             };
-            // One of the kernels by its number, compiled for AVX2 or for AVX-512.
-            macro_rules! kernel {
-                ($walk:ident) => {
-                    match kernel {
-                        0 => self.$walk::<ANY, ALL, 0>(w, ray),
-                        1 => self.$walk::<ANY, ALL, 1>(w, ray),
-                        2 => self.$walk::<ANY, ALL, 2>(w, ray),
-                        3 => self.$walk::<ANY, ALL, 3>(w, ray),
-                        4 => self.$walk::<ANY, ALL, 4>(w, ray),
-                        5 => self.$walk::<ANY, ALL, 5>(w, ray),
-                        6 => self.$walk::<ANY, ALL, 6>(w, ray),
-                        7 => self.$walk::<ANY, ALL, 7>(w, ray),
-                        8 => self.$walk::<ANY, ALL, 8>(w, ray),
-                        9 => self.$walk::<ANY, ALL, 9>(w, ray),
-                        _ => self.$walk::<ANY, ALL, 10>(w, ray),
-                    }
-                };
-            }
-            // SAFETY: `AVX` drivers only run when `isa` says the CPU has AVX2 and FMA
-            // (`Tracer::traverse`), and `Isa::Avx512` only when it has AVX-512 F and VL too.
-            return unsafe {
-                match self.isa {
-                    packet::Isa::Avx512 => kernel!(walk_avx512),
-                    _ => kernel!(walk_avx2),
-                }
+        }
+        // SAFETY: the table holds AVX kernels only where `isa` says the CPU has their
+        // instructions (`Tracer::kernel_table`), and `kernel` is below `KERNELS` (an octant
+        // below 8, a generic kernel 8 + an axis below 3).
+        unsafe { self.kernels[ANY as usize].get_unchecked(kernel)(self, w, ray) }
+    }
+
+    /// The kernels for `isa`, with tile bookkeeping unless `all` tiles are checked
+    /// ([`Tracer::kernels`]).
+    fn kernel_table(isa: packet::Isa, all: bool) -> [[Kernel; KERNELS]; 2] {
+        macro_rules! row {
+            ($walk:ident, $any:literal, $all:literal) => {
+                [
+                    $walk::<$any, $all, 0> as Kernel,
+                    $walk::<$any, $all, 1> as Kernel,
+                    $walk::<$any, $all, 2> as Kernel,
+                    $walk::<$any, $all, 3> as Kernel,
+                    $walk::<$any, $all, 4> as Kernel,
+                    $walk::<$any, $all, 5> as Kernel,
+                    $walk::<$any, $all, 6> as Kernel,
+                    $walk::<$any, $all, 7> as Kernel,
+                    $walk::<$any, $all, 8> as Kernel,
+                    $walk::<$any, $all, 9> as Kernel,
+                    $walk::<$any, $all, 10> as Kernel,
+                ]
             };
         }
-        self.walk_baseline::<ANY, ALL>(w, ray)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline(never)]
-    fn walk_avx2<const ANY: bool, const ALL: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        self.walk::<true, ANY, ALL, OCT>(w, ray)
-    }
-
-    /// [`Tracer::walk_avx2`] compiled for AVX-512: the same operations (256 bits wide), but
-    /// 32 vector registers, so that the ray's constants stay in registers (with 16, four of
-    /// them are kept on the machine stack and reloaded at every node), and comparisons into
-    /// mask registers. bench/ab.sh against the AVX2 build on this project's Zen 4:
-    /// stanford-bunny@close +8% (primary, shadow, diffuse), grid:1000@close diffuse +5%,
-    /// memory-bound sphereflake:4 unchanged.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
-    #[inline(never)]
-    fn walk_avx512<const ANY: bool, const ALL: bool, const OCT: usize>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        self.walk::<true, ANY, ALL, OCT>(w, ray)
-    }
-
-    #[inline(never)]
-    fn walk_baseline<const ANY: bool, const ALL: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        self.walk::<false, ANY, ALL, { usize::MAX }>(w, ray)
+        #[cfg(target_arch = "x86_64")]
+        match (isa, all) {
+            (packet::Isa::Avx512, true) => return [row!(walk_avx512, false, true), row!(walk_avx512, true, true)],
+            (packet::Isa::Avx512, false) => return [row!(walk_avx512, false, false), row!(walk_avx512, true, false)],
+            (packet::Isa::Avx2, true) => return [row!(walk_avx2, false, true), row!(walk_avx2, true, true)],
+            (packet::Isa::Avx2, false) => return [row!(walk_avx2, false, false), row!(walk_avx2, true, false)],
+            _ => {}
+        }
+        let _ = isa;
+        match all {
+            true => {
+                [[walk_baseline::<false, true> as Kernel; KERNELS], [walk_baseline::<true, true> as Kernel; KERNELS]]
+            }
+            false => {
+                [[walk_baseline::<false, false> as Kernel; KERNELS], [walk_baseline::<true, false> as Kernel; KERNELS]]
+            }
+        }
     }
 
     /// The next blocks of a leaf (`left` triangles from the block at `unit`) against the
@@ -1630,6 +1635,39 @@ impl<'s> Tracer<'s> {
         w.next = next;
         event
     }
+}
+
+/// [`Tracer::walk`] compiled for AVX2 (one [`Kernel`]): a function of its own, never inlined,
+/// so that its registers are allocated for the loop alone. Free (not a method), so that it
+/// is one function for tracers of every lifetime and fits the kernel table's type.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+fn walk_avx2<const ANY: bool, const ALL: bool, const OCT: usize>(t: &Tracer<'_>, w: &mut Walk<'_>, ray: &Ray) -> Event {
+    t.walk::<true, ANY, ALL, OCT>(w, ray)
+}
+
+/// [`walk_avx2`] compiled for AVX-512: the same operations (256 bits wide), but 32 vector
+/// registers, so that the ray's constants stay in registers (with 16, four of them are kept
+/// on the machine stack and reloaded at every node), and comparisons into mask registers.
+/// bench/ab.sh against the AVX2 build on this project's Zen 4: stanford-bunny@close +8%
+/// (primary, shadow, diffuse), grid:1000@close diffuse +5%, memory-bound sphereflake:4
+/// unchanged.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+#[inline(never)]
+fn walk_avx512<const ANY: bool, const ALL: bool, const OCT: usize>(
+    t: &Tracer<'_>,
+    w: &mut Walk<'_>,
+    ray: &Ray,
+) -> Event {
+    t.walk::<true, ANY, ALL, OCT>(w, ray)
+}
+
+/// [`Tracer::walk`] on the baseline instruction set (SSE2 on x86-64).
+#[inline(never)]
+fn walk_baseline<const ANY: bool, const ALL: bool>(t: &Tracer<'_>, w: &mut Walk<'_>, ray: &Ray) -> Event {
+    t.walk::<false, ANY, ALL, { usize::MAX }>(w, ray)
 }
 
 /// The lanes of a block that hold triangles, when `left` triangles of a leaf remain.
