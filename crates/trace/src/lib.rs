@@ -737,17 +737,20 @@ pub enum Traced {
 impl<'s> Tracer<'s> {
     pub fn new(scene: &'s Scene) -> Tracer<'s> {
         let top0 = scene.header().top_nodes_off / NODE_BYTES as u64;
+        // Read once: the kernel table must be the one of the settings the tracer records
+        // (another thread may finish checking every tile meanwhile).
+        let (isa, all_checked) = (packet::Isa::detect(), scene.all_tiles_checked());
         Tracer {
             scene,
             pager: None,
             tiles: scene.tiles(),
             nodes: scene.node_pool(),
-            isa: packet::Isa::detect(),
+            isa,
             bounds: scene.header().bounds,
             checked: scene.checked_tiles(),
-            all_checked: scene.all_tiles_checked(),
+            all_checked,
             octant_kernels: None,
-            kernels: Tracer::kernel_table(packet::Isa::detect(), scene.all_tiles_checked()),
+            kernels: Tracer::kernel_table(isa, all_checked),
             root: match scene.parts() {
                 // The part's root, as the top-level tree links to it (in range: checked by
                 // `Scene::open`).
