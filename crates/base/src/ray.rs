@@ -6,6 +6,9 @@ use glam::Vec3;
 pub struct Ray {
     pub org: Vec3,
     pub dir: Vec3,
+    /// Where hits start, at least 0: a negative `t_min` counts as 0 (hits behind the origin
+    /// are never reported; as in Embree, where it must not be negative). The tracers' box
+    /// tests rely on it (they compare distances that are never below 0 as integers).
     pub t_min: f32,
     pub t_max: f32,
 }
@@ -179,7 +182,9 @@ impl WatertightRay {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / d[kz];
-        WatertightRay { org: ray.org.into(), k: [kx, ky, kz], s: [d[kx] * sz, d[ky] * sz, sz], t_min: ray.t_min }
+        // A negative `t_min` counts as 0 ([`Ray::t_min`]).
+        let t_min = ray.t_min.max(0.0);
+        WatertightRay { org: ray.org.into(), k: [kx, ky, kz], s: [d[kx] * sz, d[ky] * sz, sz], t_min }
     }
 
     /// The watertight test against triangle `tri` (corners as arrays), hits in `[t_min, t_max)`.

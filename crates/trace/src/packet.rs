@@ -468,6 +468,8 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
     // Unused lanes repeat ray 0 (they never enter a box: their `t_max` is -inf), so that
     // the packet's bounds can be taken over all 16 lanes.
     let mut q = *rays;
+    // A negative `t_min` counts as 0 ([`Ray::t_min`](megaray_base::Ray::t_min)).
+    q.t_min = q.t_min.map(|t| t.max(0.0));
     for i in n..WIDTH {
         for a in 0..3 {
             (q.org[a][i], q.dir[a][i]) = (q.org[a][0], q.dir[a][0]);
