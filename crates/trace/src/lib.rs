@@ -378,6 +378,16 @@ fn corners(v: &Block, lane: usize) -> [[f32; 3]; 3] {
     [[v[0][lane], v[1][lane], v[2][lane]], [v[3][lane], v[4][lane], v[5][lane]], [v[6][lane], v[7][lane], v[8][lane]]]
 }
 
+/// Row `k` (an axis) of corner `c` of block `b`: the four lanes' coordinate `k` of
+/// their corner `c`. Unchecked: `c` and `k` are below 3 (`k` from [`AXES`], `c` a
+/// constant), so the row is one of the block's nine.
+#[inline(always)]
+fn row(b: &Block, c: usize, k: usize) -> [f32; 4] {
+    debug_assert!(c < 3 && k < 3);
+    // SAFETY: 3 * c + k <= 8 (both below 3), an index of the nine rows.
+    unsafe { *b.get_unchecked(3 * c + k) }
+}
+
 /// A block that [`RayTri4::try_test`] leaves to the double-precision reference.
 #[derive(Clone, Copy, Debug)]
 struct Exact;
@@ -393,12 +403,19 @@ struct RayTri4 {
     ray: Ray,
     /// The dominant axis: the kernel's rows are `kx = kz + 1`, `ky = kz + 2` (mod 3).
     kz: usize,
+    /// `[kx, ky, kz]`, for the test that reads its rows by them ([`RayTri4::try_test_dyn`]).
+    k: [usize; 3],
     /// The shear: `d[kx] / d[kz]`, `d[ky] / d[kz]`, `1 / d[kz]`.
     s: [Vec4; 3],
+    /// The origin's `kx`, `ky`, `kz` components, for [`RayTri4::try_test_dyn`].
+    ok: [Vec4; 3],
     /// The ray's own [`Splats`], for [`RayTri4::test`] (the single-ray kernel shares its
     /// box test's instead).
     own: Splats,
 }
+
+/// `[kx, ky, kz]` of each dominant axis `kz`: `kx = kz + 1`, `ky = kz + 2` (mod 3).
+const AXES: [[usize; 3]; 3] = [[1, 2, 0], [2, 0, 1], [0, 1, 2]];
 
 /// The ray's origin (x, y, z, not permuted) and `t_min` in all four lanes: what the
 /// triangle test needs besides its own constants. The single-ray kernel takes them from its
@@ -442,6 +459,16 @@ impl RayTri4 {
         }
     }
 
+    /// [`RayTri4::dominant`] without a branch: for rays whose axes come at random
+    /// (diffuse bounces), whose choices would mispredict.
+    #[inline(always)]
+    fn dominant_unbranched(r: &Ray) -> usize {
+        let ad = r.dir.abs();
+        let (xy, xz, yz) = (ad.x > ad.y, ad.x > ad.z, ad.y > ad.z);
+        // x when above y and z, else y when above z, else z (`dominant`'s choices).
+        2 - 2 * (xy & xz) as usize - (!xy & yz) as usize
+    }
+
     /// [`RayTri4::with_inv`] for dominant axis `kz` (a constant in the kernels made for one
     /// axis, where every choice by it folds away).
     #[inline(always)]
@@ -453,12 +480,32 @@ impl RayTri4 {
             1 => (d.z, d.x, d.y, inv[1]),
             _ => (d.x, d.y, d.z, inv[2]),
         };
+        RayTri4::with_shear(r, kz, (dx, dy, dz, iz))
+    }
+
+    /// [`RayTri4::with_inv`] with the axis found and the components permuted by indexing,
+    /// not by branches (for [`RayTri4::try_test_dyn`]).
+    #[inline(always)]
+    fn with_axis_unbranched(r: &Ray, inv: &[f32; 3]) -> RayTri4 {
+        let kz = RayTri4::dominant_unbranched(r);
+        let [kx, ky, _] = AXES[kz];
+        let d = r.dir.to_array();
+        RayTri4::with_shear(r, kz, (d[kx], d[ky], d[kz], inv[kz]))
+    }
+
+    /// The constants of axis `kz` given `(d[kx], d[ky], d[kz], inv[kz])`.
+    #[inline(always)]
+    fn with_shear(r: &Ray, kz: usize, (dx, dy, dz, iz): (f32, f32, f32, f32)) -> RayTri4 {
         // The reference's `1 / d[kz]`: `inv` is that wherever `RayBox` left the component
         // as it was (a dominant component below 1e-20 is a ray of no direction).
         let sz = if dz.abs() >= 1e-20 { iz } else { 1.0 / dz };
+        let k = AXES[kz];
+        let o = r.org.to_array();
         RayTri4 {
             kz,
+            k,
             s: [Vec4::splat(dx * sz), Vec4::splat(dy * sz), Vec4::splat(sz)],
+            ok: k.map(|a| Vec4::splat(o[a])),
             // A negative `t_min` counts as 0 ([`Ray::t_min`]).
             own: Splats { o: r.org.to_array().map(Vec4::splat), t_min: Vec4::splat(r.t_min.max(0.0)) },
             ray: *r,
@@ -478,11 +525,20 @@ impl RayTri4 {
     fn try_test(&self, sp: &Splats, b: &Block, lanes: u32, t_max: f32) -> Result<Option<(usize, TriHit)>, Exact> {
         // One body per dominant axis, so that the rows it reads are constants (no index
         // arithmetic or bounds checks per block); the axis is fixed per ray.
+        let o = |k: [usize; 3]| k.map(|a| sp.o[a]);
         match self.kz {
-            0 => self.test_k::<1, 2, 0>(sp, b, lanes, t_max),
-            1 => self.test_k::<2, 0, 1>(sp, b, lanes, t_max),
-            _ => self.test_k::<0, 1, 2>(sp, b, lanes, t_max),
+            0 => self.test_k(o(AXES[0]), AXES[0], sp.t_min, b, lanes, t_max),
+            1 => self.test_k(o(AXES[1]), AXES[1], sp.t_min, b, lanes, t_max),
+            _ => self.test_k(o(AXES[2]), AXES[2], sp.t_min, b, lanes, t_max),
         }
+    }
+
+    /// [`RayTri4::try_test`] reading the block's rows by the ray's axes (`k`) rather than
+    /// by a branch to a body of constant rows: for the kernel of rays whose axes come at
+    /// random ([`Tracer::walk_on`]). The same operations, so the same results.
+    #[inline(always)]
+    fn try_test_dyn(&self, sp: &Splats, b: &Block, lanes: u32, t_max: f32) -> Result<Option<(usize, TriHit)>, Exact> {
+        self.test_k(self.ok, self.k, sp.t_min, b, lanes, t_max)
     }
 
     /// [`RayTri4::try_test`] of two blocks at once (`b0` in lanes 0..4, `b1` in lanes 4..8
@@ -503,19 +559,19 @@ impl RayTri4 {
         // SAFETY: only called in the AVX kernels (`Tracer::walk` with `AVX`), which run only
         // on CPUs with AVX2 and FMA (`Tracer::traverse`), and by a test that checks first.
         unsafe {
+            let o = |k: [usize; 3]| k.map(|a| sp.o[a]);
             match self.kz {
-                0 => self.test8_k::<ANY, 1, 2, 0>(sp, b0, b1, lanes, t_max),
-                1 => self.test8_k::<ANY, 2, 0, 1>(sp, b0, b1, lanes, t_max),
-                _ => self.test8_k::<ANY, 0, 1, 2>(sp, b0, b1, lanes, t_max),
+                0 => self.test8_k::<ANY>(o(AXES[0]), AXES[0], sp.t_min, b0, b1, lanes, t_max),
+                1 => self.test8_k::<ANY>(o(AXES[1]), AXES[1], sp.t_min, b0, b1, lanes, t_max),
+                _ => self.test8_k::<ANY>(o(AXES[2]), AXES[2], sp.t_min, b0, b1, lanes, t_max),
             }
         }
     }
 
-    /// [`RayTri4::try_test8`] for the permutation `[KX, KY, KZ]` (the ray's).
+    /// [`RayTri4::try_test8`] reading the rows by the ray's axes ([`RayTri4::try_test_dyn`]).
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    fn test8_k<const ANY: bool, const KX: usize, const KY: usize, const KZ: usize>(
+    #[inline(always)]
+    fn try_test8_dyn<const ANY: bool>(
         &self,
         sp: &Splats,
         b0: &Block,
@@ -523,26 +579,47 @@ impl RayTri4 {
         lanes: u32,
         t_max: f32,
     ) -> Result<Option<(usize, TriHit)>, Exact> {
+        // SAFETY: as in `try_test8`.
+        unsafe { self.test8_k::<ANY>(self.ok, self.k, sp.t_min, b0, b1, lanes, t_max) }
+    }
+
+    /// [`RayTri4::try_test8`] for the permutation `k = [kx, ky, kz]` (the ray's), `o` the
+    /// origin's components in that order.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
+    fn test8_k<const ANY: bool>(
+        &self,
+        o: [Vec4; 3],
+        k: [usize; 3],
+        t_min: Vec4,
+        b0: &Block,
+        b1: &Block,
+        lanes: u32,
+        t_max: f32,
+    ) -> Result<Option<(usize, TriHit)>, Exact> {
         use std::arch::x86_64::*;
+        let [kx, ky, kz] = k;
         // Row `k` of corner `c`: block 0's four lanes low, block 1's high.
         let v = |c: usize, k: usize| {
-            let (lo, hi) = (Vec4::from_array(b0[3 * c + k]), Vec4::from_array(b1[3 * c + k]));
+            let (lo, hi) = (Vec4::from_array(row(b0, c, k)), Vec4::from_array(row(b1, c, k)));
             _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(lo.into()), hi.into())
         };
         // The 4-wide splats' values in all eight lanes.
         let wide = |x: Vec4| _mm256_set1_ps(x.x);
-        let (ox, oy, oz) = (wide(sp.o[KX]), wide(sp.o[KY]), wide(sp.o[KZ]));
+        let (ox, oy, oz) = (wide(o[0]), wide(o[1]), wide(o[2]));
         let [sx, sy, sz] = self.s.map(wide);
         let (sub, mul, add) = (_mm256_sub_ps, _mm256_mul_ps, _mm256_add_ps);
-        let az = sub(v(0, KZ), oz);
-        let bz = sub(v(1, KZ), oz);
-        let cz = sub(v(2, KZ), oz);
-        let ax = sub(sub(v(0, KX), ox), mul(sx, az));
-        let ay = sub(sub(v(0, KY), oy), mul(sy, az));
-        let bx = sub(sub(v(1, KX), ox), mul(sx, bz));
-        let by = sub(sub(v(1, KY), oy), mul(sy, bz));
-        let cx = sub(sub(v(2, KX), ox), mul(sx, cz));
-        let cy = sub(sub(v(2, KY), oy), mul(sy, cz));
+        let az = sub(v(0, kz), oz);
+        let bz = sub(v(1, kz), oz);
+        let cz = sub(v(2, kz), oz);
+        let ax = sub(sub(v(0, kx), ox), mul(sx, az));
+        let ay = sub(sub(v(0, ky), oy), mul(sy, az));
+        let bx = sub(sub(v(1, kx), ox), mul(sx, bz));
+        let by = sub(sub(v(1, ky), oy), mul(sy, bz));
+        let cx = sub(sub(v(2, kx), ox), mul(sx, cz));
+        let cy = sub(sub(v(2, ky), oy), mul(sy, cz));
         let u = sub(mul(cx, by), mul(cy, bx));
         let vv = sub(mul(ax, cy), mul(ay, cx));
         let w = sub(mul(bx, ay), mul(by, ax));
@@ -562,7 +639,7 @@ impl RayTri4 {
         let inv_det = _mm256_div_ps(_mm256_set1_ps(1.0), det);
         let t = mul(t_scaled, inv_det);
         let ok = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(det, z), _mm256_cmp_ps::<_CMP_GE_OS>(t, wide(sp.t_min))),
+            _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(det, z), _mm256_cmp_ps::<_CMP_GE_OS>(t, wide(t_min))),
             _mm256_cmp_ps::<_CMP_LT_OS>(t, _mm256_set1_ps(t_max)),
         );
         let mut ok = inside & _mm256_movemask_ps(ok) as u32;
@@ -594,19 +671,22 @@ impl RayTri4 {
         Ok(Some((lane, TriHit { t: ts[lane], u: vs[lane] * is[lane], v: ws[lane] * is[lane] })))
     }
 
-    /// [`RayTri4::test`] for the permutation `[KX, KY, KZ]` (the ray's).
+    /// [`RayTri4::test`] for the permutation `k = [kx, ky, kz]` (the ray's), `o` the
+    /// origin's components in that order.
     #[inline(always)]
-    fn test_k<const KX: usize, const KY: usize, const KZ: usize>(
+    fn test_k(
         &self,
-        sp: &Splats,
+        o: [Vec4; 3],
+        k: [usize; 3],
+        t_min: Vec4,
         b: &Block,
         lanes: u32,
         t_max: f32,
     ) -> Result<Option<(usize, TriHit)>, Exact> {
-        let (kx, ky, kz) = (KX, KY, KZ);
-        let (ox, oy, oz) = (sp.o[KX], sp.o[KY], sp.o[KZ]);
+        let [kx, ky, kz] = k;
+        let [ox, oy, oz] = o;
         let [sx, sy, sz] = self.s;
-        let v = |c: usize, k: usize| Vec4::from_array(b[3 * c + k]);
+        let v = |c: usize, k: usize| Vec4::from_array(row(b, c, k));
         let az = v(0, kz) - oz;
         let bz = v(1, kz) - oz;
         let cz = v(2, kz) - oz;
@@ -639,7 +719,7 @@ impl RayTri4 {
         let t_scaled = u * (sz * az) + vv * (sz * bz) + w * (sz * cz);
         let inv_det = Vec4::ONE / det;
         let t = t_scaled * inv_det;
-        let ok = inside & (det.cmpne(z) & t.cmpge(sp.t_min) & t.cmplt(Vec4::splat(t_max))).bitmask();
+        let ok = inside & (det.cmpne(z) & t.cmpge(t_min) & t.cmplt(Vec4::splat(t_max))).bitmask();
         if ok == 0 {
             return Ok(None);
         }
@@ -722,8 +802,8 @@ pub struct Tracer<'s> {
 /// instructions, which [`Tracer::kernel_table`] sees to.
 type Kernel = for<'a, 'b, 'c, 'd> unsafe fn(&'a Tracer<'b>, &'c mut Walk<'d>, &Ray) -> Event;
 
-/// Kernels per query kind: eight octant ones and three generic ones ([`Tracer::walk_on`]).
-const KERNELS: usize = 11;
+/// Kernels per query kind: eight octant ones and the generic one ([`Tracer::walk_on`]).
+const KERNELS: usize = 9;
 
 /// A ray whose traversal stopped at a tile that is not resident: its stack and best hit so
 /// far. Resume it with [`Tracer::resume`] once [`Pending::tile`] has arrived.
@@ -1322,11 +1402,11 @@ impl<'s> Tracer<'s> {
     ///
     /// On AVX2 there is one kernel per octant of ray directions, in which the rows of the
     /// near and far planes are constants (memory operands of the box test rather than six
-    /// offsets held in registers: 4% fewer instructions per ray), and three for any
-    /// direction, one per dominant axis of the ray (in which the triangle test's permutation
-    /// is a constant: diffuse rays, whose axis comes at random, mispredicted a choice by it
-    /// per ray and per block; cachegrind, grid:1000@close: 15.0 -> 13.6 mispredicted
-    /// branches per diffuse ray, measured +5-9% diffuse rays per second). Eight kernels are
+    /// offsets held in registers: 4% fewer instructions per ray), and one for any
+    /// direction, which reads the triangle test's rows by the ray's axes (held per ray, so
+    /// that nothing branches on them: diffuse rays, whose axis comes at random, mispredicted
+    /// a choice by it per block (+5-9% diffuse rays per second when it went), and then, with
+    /// a kernel per axis, the choice of kernel per ray). Eight kernels are
     /// more code than the instruction cache holds at once, so the octant kernels run only for
     /// coherent rays: when this thread's last [`STREAK_MIN`] new rays ran in the same octant
     /// (camera and shadow rays; measured +10% on them), and the generic kernels otherwise
@@ -1334,16 +1414,15 @@ impl<'s> Tracer<'s> {
     /// same hits (tested).
     #[inline(always)]
     fn walk_on<const AVX: bool, const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        // The kernel's number: an octant's (0..8) or a generic one's (8 + the dominant axis).
-        // (The baseline's table holds the same kernel under every number.)
+        // The kernel's number: an octant's (0..8) or the generic one's (8). (The baseline's
+        // table holds the same kernel under every number.)
         let mut kernel = 0;
         if AVX {
             let oct = RayBox::octant(ray);
-            // The generic kernel of the ray's dominant axis (found only when it runs).
-            let generic = || 8 + RayTri4::dominant(ray);
+            const GENERIC: usize = 8;
             kernel = match (self.octant_kernels, w.fresh) {
                 (Some(true), _) => oct,
-                (Some(false), _) => generic(),
+                (Some(false), _) => GENERIC,
                 (None, true) => {
                     let (last, n) = *w.streak;
                     let n = if last as usize == oct { n.saturating_add(1) } else { 0 };
@@ -1351,16 +1430,16 @@ impl<'s> Tracer<'s> {
                     if n >= STREAK_MIN {
                         oct
                     } else {
-                        generic()
+                        GENERIC
                     }
                 }
                 // A walk resumed after an event keeps to the generic kernel.
-                (None, false) => generic(),
+                (None, false) => GENERIC,
             };
         }
         // SAFETY: the table holds AVX kernels only where `isa` says the CPU has their
         // instructions (`Tracer::kernel_table`), and `kernel` is below `KERNELS` (an octant
-        // below 8, a generic kernel 8 + an axis below 3).
+        // below 8, or the generic kernel's 8).
         unsafe { self.kernels[ANY as usize].get_unchecked(kernel)(self, w, ray) }
     }
 
@@ -1379,8 +1458,6 @@ impl<'s> Tracer<'s> {
                     $walk::<$any, $all, 6> as Kernel,
                     $walk::<$any, $all, 7> as Kernel,
                     $walk::<$any, $all, 8> as Kernel,
-                    $walk::<$any, $all, 9> as Kernel,
-                    $walk::<$any, $all, 10> as Kernel,
                 ]
             };
         }
@@ -1406,9 +1483,13 @@ impl<'s> Tracer<'s> {
     /// The next blocks of a leaf (`left` triangles from the block at `unit`) against the
     /// ray: two at once by [`RayTri4::try_test8`] on AVX when two or more remain, else one by
     /// [`RayTri4::try_test`]. Says how many blocks it tested; a hit's lane counts across them.
+    /// With `dyn_rows` (a constant where it inlines), the tests read the rows by the ray's
+    /// axes ([`RayTri4::try_test_dyn`]).
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn test_blocks<const AVX: bool, const ANY: bool>(
         &self,
+        dyn_rows: bool,
         rt: &RayTri4,
         sp: &Splats,
         unit: u64,
@@ -1418,11 +1499,18 @@ impl<'s> Tracer<'s> {
         #[cfg(target_arch = "x86_64")]
         if AVX && left > 4 {
             stats::count(|s| s.blocks += 2);
-            let (b0, b1) = (self.walk_block_at(unit), self.walk_block_at(unit + 9));
-            return (rt.try_test8::<ANY>(sp, b0, b1, lanes8(left), t_max), 2);
+            let (b0, b1, lanes) = (self.walk_block_at(unit), self.walk_block_at(unit + 9), lanes8(left));
+            return match dyn_rows {
+                true => (rt.try_test8_dyn::<ANY>(sp, b0, b1, lanes, t_max), 2),
+                false => (rt.try_test8::<ANY>(sp, b0, b1, lanes, t_max), 2),
+            };
         }
         stats::count(|s| s.blocks += 1);
-        (rt.try_test(sp, self.walk_block_at(unit), lanes(left), t_max), 1)
+        let (b, lanes) = (self.walk_block_at(unit), lanes(left));
+        match dyn_rows {
+            true => (rt.try_test_dyn(sp, b, lanes, t_max), 1),
+            false => (rt.try_test(sp, b, lanes, t_max), 1),
+        }
     }
 
     /// The hot loop of the single-ray kernel. Near-first: of the children a node's box test
@@ -1463,13 +1551,9 @@ impl<'s> Tracer<'s> {
                 return Event::Empty;
             }
         }
-        let rt = if (8..11).contains(&OCT) {
-            // A generic kernel made for one dominant axis (`walk_on`): no choice by it, per
-            // ray or per block.
-            RayTri4::with_axis(ray, &rb.inv, OCT - 8)
-        } else {
-            RayTri4::with_inv(ray, &rb.inv)
-        };
+        // The generic kernel (`walk_on`) reads the triangles' rows by the ray's axes: no
+        // choice by them, per ray or per block.
+        let rt = if OCT == 8 { RayTri4::with_axis_unbranched(ray, &rb.inv) } else { RayTri4::with_inv(ray, &rb.inv) };
         let shared = rb.splats::<AVX>(t_min);
         let mut c = w.c;
         let mut sp = w.sp;
@@ -1536,7 +1620,8 @@ impl<'s> Tracer<'s> {
                         // A leaf: `count` triangles from the block at `unit`.
                         let (mut unit, mut left) = (r & ChildRef::MAX_UNIT, ((r >> 40) & 0xff) as u32);
                         while left > 0 {
-                            let (found, blocks) = self.test_blocks::<AVX, ANY>(&rt, &shared, unit, left, t_best);
+                            let (found, blocks) =
+                                self.test_blocks::<AVX, ANY>(OCT == 8, &rt, &shared, unit, left, t_best);
                             match found {
                                 Ok(None) => {}
                                 Ok(Some((lane, h))) => {
@@ -1864,6 +1949,12 @@ mod tests {
                     let got = rt.test(&b.v, lanes, f32::INFINITY);
                     let want = rt.scalar(&b.v, lanes, f32::INFINITY);
                     assert_eq!(got.map(|g| g.1), want.map(|w| w.1), "ray {ray:?} lanes {lanes:b}");
+                    // The form reading its rows by the ray's axes: the same, Exact included.
+                    let (fixed, dyn_rows) = (
+                        rt.try_test(&rt.own, &b.v, lanes, f32::INFINITY),
+                        rt.try_test_dyn(&rt.own, &b.v, lanes, f32::INFINITY),
+                    );
+                    assert_eq!(fixed.map_err(|_| ()), dyn_rows.map_err(|_| ()), "ray {ray:?} lanes {lanes:b}");
                     // And the scalar lane test is the base reference itself.
                     let mut best: Option<TriHit> = None;
                     for (l, t) in tris.iter().enumerate() {
@@ -1912,6 +2003,8 @@ mod tests {
                     let cases = [
                         (rt.try_test8::<false>(&rt.own, &b[0].v, &b[1].v, lanes, f32::INFINITY), nearest),
                         (rt.try_test8::<true>(&rt.own, &b[0].v, &b[1].v, lanes, f32::INFINITY), any),
+                        (rt.try_test8_dyn::<false>(&rt.own, &b[0].v, &b[1].v, lanes, f32::INFINITY), nearest),
+                        (rt.try_test8_dyn::<true>(&rt.own, &b[0].v, &b[1].v, lanes, f32::INFINITY), any),
                     ];
                     for (got, want) in cases {
                         match got {
@@ -1925,6 +2018,28 @@ mod tests {
         }
         // Most targets are vertices and edges: the lanes aimed at leave many to the reference.
         assert!(checked - exact > 100_000, "{checked} checked, {exact} left to the reference");
+    }
+
+    /// The dominant axis found without branches is the reference's, ties, zeros, infinities
+    /// and NaNs included; and the constants made by indexing equal those made by branches.
+    #[test]
+    fn unbranched_axis_equals_reference() {
+        let vals = [0.0f32, -0.0, 1.0, -1.0, 2.0, -2.0, 1e-30, f32::INFINITY, f32::NAN, 0.5];
+        for &x in &vals {
+            for &y in &vals {
+                for &z in &vals {
+                    let ray = Ray::new(Vec3::new(0.25, -0.5, 2.0), Vec3::new(x, y, z));
+                    let kz = RayTri4::dominant(&ray);
+                    assert_eq!(RayTri4::dominant_unbranched(&ray), kz, "{ray:?}");
+                    assert_eq!(kz, WatertightRay::new(&ray).k[2], "{ray:?}");
+                    let inv = RayBox::new(&ray).inv;
+                    let (a, b) = (RayTri4::with_axis(&ray, &inv, kz), RayTri4::with_axis_unbranched(&ray, &inv));
+                    let bits =
+                        |r: &RayTri4| (r.kz, r.k, [r.s, r.ok].map(|v| v.map(|l| l.to_array().map(f32::to_bits))));
+                    assert_eq!(bits(&a), bits(&b), "{ray:?}");
+                }
+            }
+        }
     }
 
     /// The AVX box test (distances compared as integers) gives the SSE reference's mask and
