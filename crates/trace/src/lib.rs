@@ -417,6 +417,9 @@ struct RayTri4 {
 /// `[kx, ky, kz]` of each dominant axis `kz`: `kx = kz + 1`, `ky = kz + 2` (mod 3).
 const AXES: [[usize; 3]; 3] = [[1, 2, 0], [2, 0, 1], [0, 1, 2]];
 
+/// The axis parameter of [`RayTri4::test8_k`] that reads the rows by the ray's axes.
+const DYN_AXES: usize = 3;
+
 /// The ray's origin (x, y, z, not permuted) and `t_min` in all four lanes: what the
 /// triangle test needs besides its own constants. The single-ray kernel takes them from its
 /// box test's 8-wide ones (their low halves, [`RayBox::splats`]), so that both tests share
@@ -541,6 +544,17 @@ impl RayTri4 {
         self.test_k(self.ok, self.k, sp.t_min, b, lanes, t_max)
     }
 
+    /// The rows `[kx, ky, kz]` of dominant axis `KZ` and the origin's components in that
+    /// order: constants (`AXES`) and the shared splats for an axis below 3, the ray's own
+    /// for [`DYN_AXES`].
+    #[inline(always)]
+    fn axes<const KZ: usize>(&self, sp: &Splats) -> ([usize; 3], [Vec4; 3]) {
+        match KZ {
+            0..3 => (AXES[KZ], AXES[KZ].map(|a| sp.o[a])),
+            _ => (self.k, self.ok),
+        }
+    }
+
     /// [`RayTri4::try_test`] of two blocks at once (`b0` in lanes 0..4, `b1` in lanes 4..8
     /// of `lanes`), as one 8-wide AVX pass: for leaves of two blocks, which then cost little
     /// more than one. The caller must only ask for it in code compiled for AVX2
@@ -559,11 +573,10 @@ impl RayTri4 {
         // SAFETY: only called in the AVX kernels (`Tracer::walk` with `AVX`), which run only
         // on CPUs with AVX2 and FMA (`Tracer::traverse`), and by a test that checks first.
         unsafe {
-            let o = |k: [usize; 3]| k.map(|a| sp.o[a]);
             match self.kz {
-                0 => self.test8_k::<ANY>(o(AXES[0]), AXES[0], sp.t_min, b0, b1, lanes, t_max),
-                1 => self.test8_k::<ANY>(o(AXES[1]), AXES[1], sp.t_min, b0, b1, lanes, t_max),
-                _ => self.test8_k::<ANY>(o(AXES[2]), AXES[2], sp.t_min, b0, b1, lanes, t_max),
+                0 => self.test8_k::<ANY, 0>(sp, b0, b1, lanes, t_max),
+                1 => self.test8_k::<ANY, 1>(sp, b0, b1, lanes, t_max),
+                _ => self.test8_k::<ANY, 2>(sp, b0, b1, lanes, t_max),
             }
         }
     }
@@ -580,27 +593,31 @@ impl RayTri4 {
         t_max: f32,
     ) -> Result<Option<(usize, TriHit)>, Exact> {
         // SAFETY: as in `try_test8`.
-        unsafe { self.test8_k::<ANY>(self.ok, self.k, sp.t_min, b0, b1, lanes, t_max) }
+        unsafe { self.test8_k::<ANY, DYN_AXES>(sp, b0, b1, lanes, t_max) }
     }
 
-    /// [`RayTri4::try_test8`] for the permutation `k = [kx, ky, kz]` (the ray's), `o` the
-    /// origin's components in that order.
+    /// [`RayTri4::try_test8`] for dominant axis `KZ` (the ray's), or, for [`DYN_AXES`], with
+    /// the rows read by the ray's axes. (One instance per axis, each called once per kernel,
+    /// so that every one is inlined: a call would clobber the kernel's vector registers.)
+    ///
+    /// # Safety
+    /// Only for CPUs with AVX2 and FMA, and only inlined into code compiled for them (it is
+    /// not compiled for them itself: `#[target_feature]` would forbid `inline(always)`, and
+    /// without that one instance did not inline, an out-of-line call per leaf test).
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    #[allow(clippy::too_many_arguments)]
-    fn test8_k<const ANY: bool>(
+    #[inline(always)]
+    unsafe fn test8_k<const ANY: bool, const KZ: usize>(
         &self,
-        o: [Vec4; 3],
-        k: [usize; 3],
-        t_min: Vec4,
+        sp: &Splats,
         b0: &Block,
         b1: &Block,
         lanes: u32,
         t_max: f32,
     ) -> Result<Option<(usize, TriHit)>, Exact> {
         use std::arch::x86_64::*;
+        let (k, o) = self.axes::<KZ>(sp);
         let [kx, ky, kz] = k;
+        let t_min = sp.t_min;
         // Row `k` of corner `c`: block 0's four lanes low, block 1's high.
         let v = |c: usize, k: usize| {
             let (lo, hi) = (Vec4::from_array(row(b0, c, k)), Vec4::from_array(row(b1, c, k)));
