@@ -59,6 +59,7 @@ while [ "$round" -le "$ROUNDS" ]; do
 done
 
 # Each side's best round per row (scene, kind, threads): the figure of its fastest minute.
+ls "$OUT_DIR"/rounds/*.jsonl > /dev/null 2>&1 || { echo "nothing measured (ONLY=\"$ONLY\" names no scene of the suite?)" >&2; exit 2; }
 for side in peer megaray; do
   python3 - "$OUT_DIR"/rounds/$side.*.jsonl > "$OUT_DIR/$side.jsonl" <<'PY'
 import json, sys

@@ -22,7 +22,7 @@ mod size;
 pub use aabb::Aabb;
 pub use glam::Vec3;
 pub use progress::{NoProgress, Progress};
-pub use ray::{intersect_triangle, Ray, Rays16, TriHit, WatertightRay};
+pub use ray::{intersect_triangle, t_start, Ray, Rays16, TriHit, WatertightRay};
 pub use size::{format_size, parse_size};
 
 /// Starts loading the cache line that holds `x` (a hint: it never faults and changes nothing

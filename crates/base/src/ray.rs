@@ -6,9 +6,12 @@ use glam::Vec3;
 pub struct Ray {
     pub org: Vec3,
     pub dir: Vec3,
-    /// Where hits start, at least 0: a negative `t_min` counts as 0 (hits behind the origin
-    /// are never reported; as in Embree, where it must not be negative). The tracers' box
-    /// tests rely on it (they compare distances that are never below 0 as integers).
+    /// Where hits start, at least 0: a negative `t_min` (or NaN) counts as 0 ([`t_start`]:
+    /// hits behind the origin are never reported; as in Embree, where it must not be
+    /// negative). The tracers' box tests rely on it (they compare distances that are never
+    /// below 0 as integers). With `t_min = 0`, a hit at exactly 0 (the origin exactly on a
+    /// triangle) may be missed where the triangle lies in a face of its leaf's box that the
+    /// ray leaves: rays leaving a surface should start a little off it, or at `t_min > 0`.
     pub t_min: f32,
     pub t_max: f32,
 }
@@ -16,6 +19,17 @@ pub struct Ray {
 impl Ray {
     pub fn new(org: Vec3, dir: Vec3) -> Ray {
         Ray { org, dir, t_min: 0.0, t_max: f32::INFINITY }
+    }
+}
+
+/// A ray's `t_min` as every test takes it: `+0.0` for anything not above 0 (negative
+/// values, `-0.0`, NaN), else itself. (`f32::max` may return `-0.0` for `-0.0` and `0.0`.)
+#[inline(always)]
+pub fn t_start(t_min: f32) -> f32 {
+    if t_min > 0.0 {
+        t_min
+    } else {
+        0.0
     }
 }
 
@@ -86,6 +100,24 @@ pub fn intersect_triangle(ray: &Ray, tri: [Vec3; 3], t_max: f32) -> Option<TriHi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `t_start` gives `+0.0` (its bits) for everything not above 0, and a positive value
+    /// itself; the scalar test counts a negative `t_min` as 0 (no hit behind the origin).
+    #[test]
+    fn negative_t_min_counts_as_zero() {
+        for t in [-1.0f32, -0.0, 0.0, f32::NAN, f32::NEG_INFINITY, -1e-40] {
+            assert_eq!(t_start(t).to_bits(), 0, "{t}");
+        }
+        for t in [1e-40f32, 0.5, f32::INFINITY] {
+            assert_eq!(t_start(t), t);
+        }
+        let tri = [Vec3::new(-1.0, -1.0, -1.0), Vec3::new(1.0, -1.0, -1.0), Vec3::new(0.0, 1.0, -1.0)];
+        let mut ray = Ray::new(Vec3::ZERO, Vec3::Z);
+        ray.t_min = -5.0;
+        assert!(intersect_triangle(&ray, tri, f32::INFINITY).is_none(), "the triangle lies behind the origin");
+        ray.dir = -Vec3::Z;
+        assert_eq!(intersect_triangle(&ray, tri, f32::INFINITY).map(|h| h.t), Some(1.0));
+    }
 
     /// A packet gives back exactly the rays it was made of, in order.
     #[test]
@@ -183,7 +215,7 @@ impl WatertightRay {
         }
         let sz = 1.0 / d[kz];
         // A negative `t_min` counts as 0 ([`Ray::t_min`]).
-        let t_min = ray.t_min.max(0.0);
+        let t_min = t_start(ray.t_min);
         WatertightRay { org: ray.org.into(), k: [kx, ky, kz], s: [d[kx] * sz, d[ky] * sz, sz], t_min }
     }
 

@@ -24,7 +24,7 @@ pub mod packet;
 pub mod stats;
 
 use glam::{Vec3A, Vec4};
-use megaray_base::{Ray, Rays16, TriHit, Vec3, WatertightRay};
+use megaray_base::{t_start, Ray, Rays16, TriHit, Vec3, WatertightRay};
 use megaray_page::{Access, Pager};
 use megaray_scene::format::{ChildRef, Node8, Tri4, NODE_BYTES, NODE_WIDTH};
 use megaray_scene::{CheckedTiles, Scene, TileEntry};
@@ -253,16 +253,17 @@ impl RayBox {
     /// the exits are here; with `AVX`, by [`RayBox::test_avx2`] (which the caller must only
     /// ask for in code compiled for AVX2).
     ///
-    /// `t0` must not be below `+0.0`. The AVX test then reduces and compares the distances'
-    /// bits as signed integers, as Embree does: one cycle each for `vpmaxsd`, `vpminsd` and
-    /// `vpcmpgtd` where their float forms take four, on the traversal's critical path
-    /// (measured +10-15% rays per second, stanford-bunny@close, all three kinds). Integer
-    /// order is float order on floats whose sign bit is clear; any with it set is below
-    /// them all, and so never the entry (`t0` is above it) and always the exit if present,
-    /// an exit that fails the comparison with every entry. So it gives the float test's
-    /// result but for one case: an exit of `-0.0` (an origin exactly on a far plane,
-    /// leaving it) misses where the float test would let an entry of `+0.0` through. The
-    /// SSE test (the reference) says so too, by testing the exits' sign bits.
+    /// `t0` must be `+0.0` or above ([`t_start`]). The AVX test then reduces and compares
+    /// the distances' bits as signed integers, as Embree does: one cycle each for `vpmaxsd`,
+    /// `vpminsd` and `vpcmpgtd` where their float forms take four, on the traversal's
+    /// critical path (measured +10-15% rays per second, stanford-bunny@close, all three
+    /// kinds). Integer order is float order on floats whose sign bit is clear; any with it
+    /// set is below them all, and so never the entry (`t0` is above it) and always the exit
+    /// if present, an exit that fails the comparison with every entry. So it gives the float
+    /// test's result but for one case: an exit of `-0.0` (an origin exactly on a far plane,
+    /// leaving it in the direction of its axis) misses where the float test would let an
+    /// entry of `+0.0` through; only a hit at exactly 0 can lie there ([`Ray::t_min`] says
+    /// so). The SSE test (the reference) does the same, by testing the exits' sign bits.
     #[inline(always)]
     fn test<const AVX: bool>(&self, n: &Node8, t0: f32, t1: f32) -> (Near, u32) {
         debug_assert!(t0.is_sign_positive(), "box tests start at +0 or later, not {t0}");
@@ -379,12 +380,14 @@ fn corners(v: &Block, lane: usize) -> [[f32; 3]; 3] {
 }
 
 /// Row `k` (an axis) of corner `c` of block `b`: the four lanes' coordinate `k` of
-/// their corner `c`. Unchecked: `c` and `k` are below 3 (`k` from [`AXES`], `c` a
-/// constant), so the row is one of the block's nine.
+/// their corner `c`, without a bounds check.
+///
+/// # Safety
+/// `c` and `k` must be below 3 (then `3 * c + k` is one of the block's nine rows).
 #[inline(always)]
-fn row(b: &Block, c: usize, k: usize) -> [f32; 4] {
+unsafe fn row(b: &Block, c: usize, k: usize) -> [f32; 4] {
     debug_assert!(c < 3 && k < 3);
-    // SAFETY: 3 * c + k <= 8 (both below 3), an index of the nine rows.
+    // SAFETY: 3 * c + k <= 8 (the caller's promise), an index of the nine rows.
     unsafe { *b.get_unchecked(3 * c + k) }
 }
 
@@ -423,7 +426,8 @@ const DYN_AXES: usize = 3;
 /// The ray's origin (x, y, z, not permuted) and `t_min` in all four lanes: what the
 /// triangle test needs besides its own constants. The single-ray kernel takes them from its
 /// box test's 8-wide ones (their low halves, [`RayBox::splats`]), so that both tests share
-/// the registers that hold them.
+/// the registers that hold them (the tests reading rows by the ray's axes take only
+/// `t_min` from here, and the origin permuted from [`RayTri4::ok`]).
 #[derive(Clone, Copy)]
 struct Splats {
     o: [Vec4; 3],
@@ -472,8 +476,9 @@ impl RayTri4 {
         2 - 2 * (xy & xz) as usize - (!xy & yz) as usize
     }
 
-    /// [`RayTri4::with_inv`] for dominant axis `kz` (a constant in the kernels made for one
-    /// axis, where every choice by it folds away).
+    /// [`RayTri4::with_inv`] for dominant axis `kz` (permuting by a branch on it: for rays
+    /// whose axis is steady, camera and shadow rays; [`RayTri4::with_axis_unbranched`]
+    /// otherwise).
     #[inline(always)]
     fn with_axis(r: &Ray, inv: &[f32; 3], kz: usize) -> RayTri4 {
         let d = r.dir;
@@ -510,7 +515,7 @@ impl RayTri4 {
             s: [Vec4::splat(dx * sz), Vec4::splat(dy * sz), Vec4::splat(sz)],
             ok: k.map(|a| Vec4::splat(o[a])),
             // A negative `t_min` counts as 0 ([`Ray::t_min`]).
-            own: Splats { o: r.org.to_array().map(Vec4::splat), t_min: Vec4::splat(r.t_min.max(0.0)) },
+            own: Splats { o: r.org.to_array().map(Vec4::splat), t_min: Vec4::splat(t_start(r.t_min)) },
             ray: *r,
         }
     }
@@ -538,7 +543,8 @@ impl RayTri4 {
 
     /// [`RayTri4::try_test`] reading the block's rows by the ray's axes (`k`) rather than
     /// by a branch to a body of constant rows: for the kernel of rays whose axes come at
-    /// random ([`Tracer::walk_on`]). The same operations, so the same results.
+    /// random ([`Tracer::walk_on`]). The same operations, so the same results. Of `sp` it
+    /// reads `t_min` only (the origin comes permuted, [`RayTri4::ok`]).
     #[inline(always)]
     fn try_test_dyn(&self, sp: &Splats, b: &Block, lanes: u32, t_max: f32) -> Result<Option<(usize, TriHit)>, Exact> {
         self.test_k(self.ok, self.k, sp.t_min, b, lanes, t_max)
@@ -600,10 +606,13 @@ impl RayTri4 {
     /// the rows read by the ray's axes. (One instance per axis, each called once per kernel,
     /// so that every one is inlined: a call would clobber the kernel's vector registers.)
     ///
+    /// Inlined into the AVX kernels, whose instruction set its intrinsics then use: it is not
+    /// compiled for AVX itself, as `#[target_feature]` would forbid `inline(always)`, and
+    /// without that one instance did not inline (an out-of-line call per leaf test, which
+    /// clobbered the kernel's vector registers).
+    ///
     /// # Safety
-    /// Only for CPUs with AVX2 and FMA, and only inlined into code compiled for them (it is
-    /// not compiled for them itself: `#[target_feature]` would forbid `inline(always)`, and
-    /// without that one instance did not inline, an out-of-line call per leaf test).
+    /// The CPU must have AVX.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     unsafe fn test8_k<const ANY: bool, const KZ: usize>(
@@ -619,8 +628,10 @@ impl RayTri4 {
         let [kx, ky, kz] = k;
         let t_min = sp.t_min;
         // Row `k` of corner `c`: block 0's four lanes low, block 1's high.
+        // SAFETY (`row`): `c` is a constant below 3 and `k` one of `k`'s, axes below 3
+        // (from `AXES`, as `RayTri4::k` is).
         let v = |c: usize, k: usize| {
-            let (lo, hi) = (Vec4::from_array(row(b0, c, k)), Vec4::from_array(row(b1, c, k)));
+            let (lo, hi) = unsafe { (Vec4::from_array(row(b0, c, k)), Vec4::from_array(row(b1, c, k))) };
             _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(lo.into()), hi.into())
         };
         // The 4-wide splats' values in all eight lanes.
@@ -703,7 +714,9 @@ impl RayTri4 {
         let [kx, ky, kz] = k;
         let [ox, oy, oz] = o;
         let [sx, sy, sz] = self.s;
-        let v = |c: usize, k: usize| Vec4::from_array(row(b, c, k));
+        // SAFETY (`row`): `c` is a constant below 3 and `k` one of `k`'s, axes below 3
+        // (from `AXES`, as `RayTri4::k` is).
+        let v = |c: usize, k: usize| Vec4::from_array(unsafe { row(b, c, k) });
         let az = v(0, kz) - oz;
         let bz = v(1, kz) - oz;
         let cz = v(2, kz) - oz;
@@ -1426,7 +1439,7 @@ impl<'s> Tracer<'s> {
     /// a kernel per axis, the choice of kernel per ray). Eight kernels are
     /// more code than the instruction cache holds at once, so the octant kernels run only for
     /// coherent rays: when this thread's last [`STREAK_MIN`] new rays ran in the same octant
-    /// (camera and shadow rays; measured +10% on them), and the generic kernels otherwise
+    /// (camera and shadow rays; measured +10% on them), and the generic kernel otherwise
     /// (diffuse bounces, whose octants come at random; measured +7% on them). All give the
     /// same hits (tested).
     #[inline(always)]
@@ -1503,7 +1516,6 @@ impl<'s> Tracer<'s> {
     /// With `dyn_rows` (a constant where it inlines), the tests read the rows by the ray's
     /// axes ([`RayTri4::try_test_dyn`]).
     #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
     fn test_blocks<const AVX: bool, const ANY: bool>(
         &self,
         dyn_rows: bool,
@@ -1559,8 +1571,8 @@ impl<'s> Tracer<'s> {
             // The ray's octant (`walk_on` chose this kernel by it), as a constant.
             rb.rows = &ROWS[OCT];
         }
-        // Never below 0 ([`Ray::t_min`]): the box tests need it ([`RayBox::test`]).
-        let t_min = ray.t_min.max(0.0);
+        // Never below +0 ([`Ray::t_min`]): the box tests need it ([`RayBox::test`]).
+        let t_min = t_start(ray.t_min);
         if w.fresh {
             w.fresh = false;
             if !rb.starts_inside(&self.bounds) && !rb.enters(&self.bounds, t_min, ray.t_max) {
@@ -2092,7 +2104,7 @@ mod tests {
             let mut org = rng.v() * 1.5;
             if case % 3 == 0 {
                 // The origin on a plane of a slot (when not empty).
-                let (k, i) = (case % 6 / 2 * 2 + case % 2, case % W);
+                let (k, i) = (case / 3 % 6, case % W);
                 let p = n.planes()[k][i];
                 if p.is_finite() {
                     org[k / 2] = p;

@@ -469,7 +469,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
     // the packet's bounds can be taken over all 16 lanes.
     let mut q = *rays;
     // A negative `t_min` counts as 0 ([`Ray::t_min`](megaray_base::Ray::t_min)).
-    q.t_min = q.t_min.map(|t| t.max(0.0));
+    q.t_min = q.t_min.map(megaray_base::t_start);
     for i in n..WIDTH {
         for a in 0..3 {
             (q.org[a][i], q.dir[a][i]) = (q.org[a][0], q.dir[a][0]);
