@@ -420,7 +420,8 @@ struct RayTri4 {
 /// `[kx, ky, kz]` of each dominant axis `kz`: `kx = kz + 1`, `ky = kz + 2` (mod 3).
 const AXES: [[usize; 3]; 3] = [[1, 2, 0], [2, 0, 1], [0, 1, 2]];
 
-/// The axis parameter of [`RayTri4::test8_k`] that reads the rows by the ray's axes.
+/// The axis parameter of [`RayTri4::test_k`] and [`RayTri4::test8_k`] that reads the rows
+/// by the ray's axes.
 const DYN_AXES: usize = 3;
 
 /// The ray's origin (x, y, z, not permuted) and `t_min` in all four lanes: what the
@@ -533,11 +534,10 @@ impl RayTri4 {
     fn try_test(&self, sp: &Splats, b: &Block, lanes: u32, t_max: f32) -> Result<Option<(usize, TriHit)>, Exact> {
         // One body per dominant axis, so that the rows it reads are constants (no index
         // arithmetic or bounds checks per block); the axis is fixed per ray.
-        let o = |k: [usize; 3]| k.map(|a| sp.o[a]);
         match self.kz {
-            0 => self.test_k(o(AXES[0]), AXES[0], sp.t_min, b, lanes, t_max),
-            1 => self.test_k(o(AXES[1]), AXES[1], sp.t_min, b, lanes, t_max),
-            _ => self.test_k(o(AXES[2]), AXES[2], sp.t_min, b, lanes, t_max),
+            0 => self.test_k::<0>(sp, b, lanes, t_max),
+            1 => self.test_k::<1>(sp, b, lanes, t_max),
+            _ => self.test_k::<2>(sp, b, lanes, t_max),
         }
     }
 
@@ -547,7 +547,7 @@ impl RayTri4 {
     /// reads `t_min` only (the origin comes permuted, [`RayTri4::ok`]).
     #[inline(always)]
     fn try_test_dyn(&self, sp: &Splats, b: &Block, lanes: u32, t_max: f32) -> Result<Option<(usize, TriHit)>, Exact> {
-        self.test_k(self.ok, self.k, sp.t_min, b, lanes, t_max)
+        self.test_k::<DYN_AXES>(sp, b, lanes, t_max)
     }
 
     /// The rows `[kx, ky, kz]` of dominant axis `KZ` and the origin's components in that
@@ -603,13 +603,11 @@ impl RayTri4 {
     }
 
     /// [`RayTri4::try_test8`] for dominant axis `KZ` (the ray's), or, for [`DYN_AXES`], with
-    /// the rows read by the ray's axes. (One instance per axis, each called once per kernel,
-    /// so that every one is inlined: a call would clobber the kernel's vector registers.)
-    ///
-    /// Inlined into the AVX kernels, whose instruction set its intrinsics then use: it is not
-    /// compiled for AVX itself, as `#[target_feature]` would forbid `inline(always)`, and
-    /// without that one instance did not inline (an out-of-line call per leaf test, which
-    /// clobbered the kernel's vector registers).
+    /// the rows read by the ray's axes ([`RayTri4::axes`]). Inlined into the AVX kernels,
+    /// whose instruction set its intrinsics then use: it is not compiled for AVX itself, as
+    /// `#[target_feature]` would forbid `inline(always)`, and without that one instance did
+    /// not inline (an out-of-line call per leaf test, which clobbered the kernel's vector
+    /// registers).
     ///
     /// # Safety
     /// The CPU must have AVX.
@@ -699,20 +697,18 @@ impl RayTri4 {
         Ok(Some((lane, TriHit { t: ts[lane], u: vs[lane] * is[lane], v: ws[lane] * is[lane] })))
     }
 
-    /// [`RayTri4::test`] for the permutation `k = [kx, ky, kz]` (the ray's), `o` the
-    /// origin's components in that order.
+    /// [`RayTri4::test`] for dominant axis `KZ` (the ray's), or, for [`DYN_AXES`], with the
+    /// rows read by the ray's axes ([`RayTri4::axes`]).
     #[inline(always)]
-    fn test_k(
+    fn test_k<const KZ: usize>(
         &self,
-        o: [Vec4; 3],
-        k: [usize; 3],
-        t_min: Vec4,
+        sp: &Splats,
         b: &Block,
         lanes: u32,
         t_max: f32,
     ) -> Result<Option<(usize, TriHit)>, Exact> {
-        let [kx, ky, kz] = k;
-        let [ox, oy, oz] = o;
+        let ([kx, ky, kz], [ox, oy, oz]) = self.axes::<KZ>(sp);
+        let t_min = sp.t_min;
         let [sx, sy, sz] = self.s;
         // SAFETY (`row`): `c` is a constant below 3 and `k` one of `k`'s, axes below 3
         // (from `AXES`, as `RayTri4::k` is).
@@ -832,8 +828,11 @@ pub struct Tracer<'s> {
 /// instructions, which [`Tracer::kernel_table`] sees to.
 type Kernel = for<'a, 'b, 'c, 'd> unsafe fn(&'a Tracer<'b>, &'c mut Walk<'d>, &Ray) -> Event;
 
+/// The generic kernel's number ([`Tracer::walk_on`]; octants' are `0..8`).
+const GENERIC: usize = 8;
+
 /// Kernels per query kind: eight octant ones and the generic one ([`Tracer::walk_on`]).
-const KERNELS: usize = 9;
+const KERNELS: usize = GENERIC + 1;
 
 /// A ray whose traversal stopped at a tile that is not resident: its stack and best hit so
 /// far. Resume it with [`Tracer::resume`] once [`Pending::tile`] has arrived.
@@ -1444,12 +1443,11 @@ impl<'s> Tracer<'s> {
     /// same hits (tested).
     #[inline(always)]
     fn walk_on<const AVX: bool, const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        // The kernel's number: an octant's (0..8) or the generic one's (8). (The baseline's
+        // The kernel's number: an octant's (0..8) or [`GENERIC`]. (The baseline's
         // table holds the same kernel under every number.)
         let mut kernel = 0;
         if AVX {
             let oct = RayBox::octant(ray);
-            const GENERIC: usize = 8;
             kernel = match (self.octant_kernels, w.fresh) {
                 (Some(true), _) => oct,
                 (Some(false), _) => GENERIC,
@@ -1469,7 +1467,7 @@ impl<'s> Tracer<'s> {
         }
         // SAFETY: the table holds AVX kernels only where `isa` says the CPU has their
         // instructions (`Tracer::kernel_table`), and `kernel` is below `KERNELS` (an octant
-        // below 8, or the generic kernel's 8).
+        // below 8, or [`GENERIC`]).
         unsafe { self.kernels[ANY as usize].get_unchecked(kernel)(self, w, ray) }
     }
 
@@ -1487,7 +1485,7 @@ impl<'s> Tracer<'s> {
                     $walk::<$any, $all, 5> as Kernel,
                     $walk::<$any, $all, 6> as Kernel,
                     $walk::<$any, $all, 7> as Kernel,
-                    $walk::<$any, $all, 8> as Kernel,
+                    $walk::<$any, $all, GENERIC> as Kernel,
                 ]
             };
         }
@@ -1582,7 +1580,8 @@ impl<'s> Tracer<'s> {
         }
         // The generic kernel (`walk_on`) reads the triangles' rows by the ray's axes: no
         // choice by them, per ray or per block.
-        let rt = if OCT == 8 { RayTri4::with_axis_unbranched(ray, &rb.inv) } else { RayTri4::with_inv(ray, &rb.inv) };
+        let rt =
+            if OCT == GENERIC { RayTri4::with_axis_unbranched(ray, &rb.inv) } else { RayTri4::with_inv(ray, &rb.inv) };
         let shared = rb.splats::<AVX>(t_min);
         let mut c = w.c;
         let mut sp = w.sp;
@@ -1650,7 +1649,7 @@ impl<'s> Tracer<'s> {
                         let (mut unit, mut left) = (r & ChildRef::MAX_UNIT, ((r >> 40) & 0xff) as u32);
                         while left > 0 {
                             let (found, blocks) =
-                                self.test_blocks::<AVX, ANY>(OCT == 8, &rt, &shared, unit, left, t_best);
+                                self.test_blocks::<AVX, ANY>(OCT == GENERIC, &rt, &shared, unit, left, t_best);
                             match found {
                                 Ok(None) => {}
                                 Ok(Some((lane, h))) => {
