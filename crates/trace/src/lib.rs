@@ -664,8 +664,9 @@ impl RayTri4 {
         let t_scaled = add(add(mul(u, mul(sz, az)), mul(vv, mul(sz, bz))), mul(w, mul(sz, cz)));
         let inv_det = _mm256_div_ps(_mm256_set1_ps(1.0), det);
         let t = mul(t_scaled, inv_det);
+        // (`det` is not zero in an `inside` lane: see `test_k`.)
         let ok = _mm256_and_ps(
-            _mm256_and_ps(_mm256_cmp_ps::<_CMP_NEQ_UQ>(det, z), _mm256_cmp_ps::<_CMP_GE_OS>(t, wide(t_min))),
+            _mm256_cmp_ps::<_CMP_GE_OS>(t, wide(t_min)),
             _mm256_cmp_ps::<_CMP_LT_OS>(t, _mm256_set1_ps(t_max)),
         );
         let mut ok = inside & _mm256_movemask_ps(ok) as u32;
@@ -741,11 +742,14 @@ impl RayTri4 {
             // The usual outcome: no lane's edge functions agree in sign (no division needed).
             return Ok(None);
         }
+        // The determinant of an `inside` lane, the sum of three edge functions of one sign
+        // and none zero, is not zero either: the reference's `det == 0` test never rejects
+        // such a lane, and none is needed here.
         let det = u + vv + w;
         let t_scaled = u * (sz * az) + vv * (sz * bz) + w * (sz * cz);
         let inv_det = Vec4::ONE / det;
         let t = t_scaled * inv_det;
-        let ok = inside & (det.cmpne(z) & t.cmpge(t_min) & t.cmplt(Vec4::splat(t_max))).bitmask();
+        let ok = inside & (t.cmpge(t_min) & t.cmplt(Vec4::splat(t_max))).bitmask();
         if ok == 0 {
             return Ok(None);
         }

@@ -373,13 +373,17 @@ impl PacketTri {
             let w = bx * ay - by * ax;
             // Bitwise `|` and `&`, not short-circuits: branch-free, so the loop vectorizes.
             exact[r] = (u == 0.0) | (v == 0.0) | (w == 0.0);
-            let neg = (u < 0.0) | (v < 0.0) | (w < 0.0);
-            let pos = (u > 0.0) | (v > 0.0) | (w > 0.0);
+            // With no edge function zero (else the ray is `exact`), they agree in sign (the
+            // reference's `!((u < 0 || v < 0 || w < 0) && (u > 0 || ..))`) exactly when their
+            // sign bits do; and then their sum, the determinant, is not zero either (the
+            // reference's `det == 0` test never rejects such a ray).
+            let (su, sv, sw) = (u.to_bits(), v.to_bits(), w.to_bits());
+            let agree = ((su ^ sv) | (su ^ sw)) >> 31 == 0;
             let det = u + v + w;
             let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
             let inv_det = 1.0 / det;
             let t = t_scaled * inv_det;
-            let ok = !(neg & pos) & (det != 0.0) & (t >= self.t_min[r]) & (t < t_max[r]) & !exact[r] & live[r];
+            let ok = agree & (t >= self.t_min[r]) & (t < t_max[r]) & !exact[r] & live[r];
             t_max[r] = if ok { t } else { t_max[r] };
             res.u[r] = if ok { v * inv_det } else { res.u[r] };
             res.v[r] = if ok { w * inv_det } else { res.v[r] };
