@@ -625,12 +625,12 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
     }
     for (r, hit) in hits.iter_mut().take(n).enumerate() {
         let at = (res.at_hi[r] as u64) << 32 | res.at_lo[r] as u64;
-        *hit = if at == NONE {
-            None
-        } else {
-            let h = TriHit { t: p.t_max[r], u: res.u[r], v: res.v[r] };
-            tracer.hit_of(Some(Found::new(h, res.arr[r], at >> 2, (at & 3) as usize)))
-        };
+        if at == NONE {
+            *hit = None;
+            continue;
+        }
+        let h = TriHit { t: p.t_max[r], u: res.u[r], v: res.v[r] };
+        *hit = tracer.hit_of(Some(Found::new(h, res.arr[r], at >> 2, (at & 3) as usize)));
     }
 }
 
