@@ -25,7 +25,7 @@ fn resident_scene_memory_stays_within_the_budget() {
     let ply = gen(dir.path(), "plant:600k");
     let (path, _) = build(dir.path(), &[ply], "big", Some(60_000));
     let file = std::fs::metadata(&path).unwrap().len();
-    let budget: u64 = 8 << 20;
+    let budget: u64 = 6 << 20;
     assert!(file > 4 * budget, "the scene ({file} bytes) is not several times the budget");
     let scene = Arc::new(Scene::open(&path).unwrap());
     let pager = Pager::new(scene.clone(), PagerOptions { budget, fetchers: 2 }).unwrap();
