@@ -48,11 +48,11 @@ pub struct BvhConfig {
 /// boxed; each subtree built by one thread is a [`Flat`] array, one allocation in the order
 /// the collapse reads it.
 enum BNode {
-    /// `dp`: its [`Collapse`] choices and costs, for a [`Quality::High`] build.
+    /// `dp`: its [`Costs`] and [`Collapse`] choices, for a [`Quality::High`] build.
     Inner {
         bounds: Aabb,
         kids: Box<[BNode; 2]>,
-        dp: Option<(Collapse, Costs)>,
+        dp: Option<(Costs, Collapse)>,
     },
     Flat(Flat),
 }
@@ -61,7 +61,7 @@ impl BNode {
     /// The [`Costs`] of this subtree's root, for a [`Quality::High`] build.
     fn costs(&self) -> Option<Costs> {
         match self {
-            BNode::Inner { dp, .. } => dp.map(|d| d.1),
+            BNode::Inner { dp, .. } => dp.map(|d| d.0),
             BNode::Flat(f) => (!f.dp.is_empty()).then_some(f.cost),
         }
     }
@@ -85,7 +85,7 @@ struct Flat {
 type Costs = [f32; NODE_WIDTH];
 
 /// Per slot count `i` (entry `i - 1`) of a binary inner node: how many of the `i` slots its
-/// left subtree takes when the node is opened (low bits), and [`Collapse::SLOT`] when the
+/// left subtree takes when the node is opened (low bits), and [`SLOT`] when the
 /// node costs less as one slot than opened.
 type Collapse = [u8; NODE_WIDTH];
 const SLOT: u8 = 0x80;
@@ -172,7 +172,7 @@ enum BRef<'a> {
 impl<'a> BRef<'a> {
     fn of(n: &'a BNode) -> BRef<'a> {
         match n {
-            BNode::Inner { bounds, kids, dp } => BRef::Boxed(bounds, kids, dp.as_ref().map(|d| &d.0)),
+            BNode::Inner { bounds, kids, dp } => BRef::Boxed(bounds, kids, dp.as_ref().map(|d| &d.1)),
             BNode::Flat(f) => BRef::Flat(f, 0),
         }
     }
@@ -533,7 +533,7 @@ impl Ctx {
                 debug_assert!(!soft, "small nodes are flat");
                 let (ln, rn) = rayon::join(|| self.build(l, le, start), || self.build(r, re, rstart));
                 let dp = match (ln.costs(), rn.costs()) {
-                    (Some(lc), Some(rc)) => Some(combine(bounds.half_area(), 0, &lc, &rc)).map(|(c, d)| (d, c)),
+                    (Some(lc), Some(rc)) => Some(combine(bounds.half_area(), 0, &lc, &rc)),
                     _ => None,
                 };
                 Some(BNode::Inner { bounds, kids: Box::new([ln, rn]), dp })
@@ -973,6 +973,23 @@ mod tests {
         ((s >> 40) as f32 / 16777216.0, (s >> 20 & 0xfffff) as f32 / 1048576.0, (s & mask) as f32)
     }
 
+    /// 20,000 small boxes at random, in a thin slab.
+    fn small_boxes() -> Vec<Aabb> {
+        random_boxes(5, 20_000, |s| {
+            let (x, y, z) = coords(s, 0xfff);
+            Aabb { min: [x, y, z / 4096.0], max: [x + 0.004, y + 0.003, z / 4096.0 + 0.002] }
+        })
+    }
+
+    /// 30,000 thin boxes of random lengths along x, many of them overlapping.
+    fn thin_boxes() -> Vec<Aabb> {
+        random_boxes(3, 30_000, |s| {
+            let (x, y, z) = coords(s, 0xfff);
+            let long = (s >> 12 & 0xff) as f32 / 2560.0;
+            Aabb { min: [x, y, z / 4096.0], max: [x + long, y + 0.002, z / 4096.0 + 0.001] }
+        })
+    }
+
     /// The serial and parallel builds of the same input made the same tree.
     fn assert_same_tree(serial: &Bvh, par: &Bvh, what: &str) {
         assert_eq!(serial.order, par.order, "{what}");
@@ -1017,10 +1034,7 @@ mod tests {
     /// (a full node has no room for them).
     #[test]
     fn soft_nodes_open_into_free_slots() {
-        let boxes = random_boxes(5, 20_000, |s| {
-            let (x, y, z) = coords(s, 0xfff);
-            Aabb { min: [x, y, z / 4096.0], max: [x + 0.004, y + 0.003, z / 4096.0 + 0.002] }
-        });
+        let boxes = small_boxes();
         for quality in [Quality::Medium, Quality::High] {
             let b = build_bvh(&boxes, BvhConfig { max_leaf: 8, parallel_above: 3000, quality });
             let mut kept = 0;
@@ -1060,11 +1074,7 @@ mod tests {
     /// random, many of them overlapping) and packs its leaves at least as full.
     #[test]
     fn high_quality_builds_better_trees() {
-        let boxes = random_boxes(3, 30_000, |s| {
-            let (x, y, z) = coords(s, 0xfff);
-            let long = (s >> 12 & 0xff) as f32 / 2560.0;
-            Aabb { min: [x, y, z / 4096.0], max: [x + long, y + 0.002, z / 4096.0 + 0.001] }
-        });
+        let boxes = thin_boxes();
         let build = |quality| build_bvh(&boxes, BvhConfig { max_leaf: 4, parallel_above: usize::MAX, quality });
         let (medium, high) = (build(Quality::Medium), build(Quality::High));
         let leaves = |b: &Bvh| b.nodes.iter().flat_map(|n| n.kids).filter(|k| matches!(k, Kid::Leaf { .. })).count();
@@ -1088,16 +1098,7 @@ mod tests {
     /// boxed tops, soft nodes and leaves of one and two blocks; and is cheaper on them all.
     #[test]
     fn dp_collapse_costs_no_more_than_greedy() {
-        let thin = random_boxes(3, 30_000, |s| {
-            let (x, y, z) = coords(s, 0xfff);
-            let long = (s >> 12 & 0xff) as f32 / 2560.0;
-            Aabb { min: [x, y, z / 4096.0], max: [x + long, y + 0.002, z / 4096.0 + 0.001] }
-        });
-        let small = random_boxes(5, 20_000, |s| {
-            let (x, y, z) = coords(s, 0xfff);
-            Aabb { min: [x, y, z / 4096.0], max: [x + 0.004, y + 0.003, z / 4096.0 + 0.002] }
-        });
-        for (what, boxes) in [("thin", thin), ("small", small)] {
+        for (what, boxes) in [("thin", thin_boxes()), ("small", small_boxes())] {
             let cfg = BvhConfig { max_leaf: 8, parallel_above: 3000, quality: Quality::High };
             let mut refs: Vec<PrimRef> = boxes.iter().enumerate().map(|(i, b)| PrimRef::new(b, i as u32)).collect();
             let ext = Extent::of(&refs);
