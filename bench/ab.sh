@@ -9,6 +9,9 @@
 # A and B default to target/release/megaray; SA and SB, when set, replace SCENE for that side.
 # Each side runs `megaray bench SCENE --threads 1 --reps 3 --json ARGS`. Prints, per ray kind,
 # the median Mrays/s (Mtris/s for build kinds) of each side and the median of the per-round ratios B/A (with every round's).
+# With PER_CPU=1 each figure is divided by the run's cpu_util (CPU seconds per wall second):
+# per CPU second rather than per wall second, which takes out the time a busy host stole
+# from the VM (its steal time is not the process's CPU time).
 # Needs two cores and taskset (util-linux).
 set -e
 [ $# -ge 2 ] || { sed -n '2,12p' "$0"; exit 2; }
@@ -26,9 +29,9 @@ while [ "$i" -le "$rounds" ]; do
   wait
   i=$((i + 1))
 done
-python3 - "$tmp" "$rounds" <<'PY'
+python3 - "$tmp" "$rounds" "${PER_CPU:-0}" <<'PY'
 import json, statistics as st, sys
-tmp, rounds = sys.argv[1], int(sys.argv[2])
+tmp, rounds, per_cpu = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1"
 figs = {}
 for side in "AB":
     for i in range(1, rounds + 1):
@@ -37,6 +40,8 @@ for side in "AB":
                 r = json.loads(line)
                 # Rays per second, or triangles per second for the build kinds.
                 fig = r.get("mrays_s", r.get("mtris_s"))
+                if fig is not None and per_cpu and r.get("cpu_util", 0) > 0:
+                    fig /= r["cpu_util"]
                 if fig is not None:
                     figs.setdefault((r["kind"], side), []).append(fig)
 for kind in sorted({k for k, _ in figs}):
