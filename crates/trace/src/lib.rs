@@ -23,7 +23,7 @@ pub mod jobs;
 pub mod packet;
 pub mod stats;
 
-use glam::{Vec3A, Vec4};
+use glam::{Vec3A, Vec3Swizzles, Vec4};
 use megaray_base::{t_start, Ray, Rays16, TriHit, Vec3, WatertightRay};
 use megaray_page::{Access, Pager};
 use megaray_scene::format::{ChildRef, Node8, Tri4, NODE_BYTES, NODE_WIDTH};
@@ -98,7 +98,7 @@ const STACK: usize = 64;
 const BOX_EPS: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 /// The widening of the single-ray kernel's box exits, folded into the reciprocals of its far
-/// planes ([`RayBox::inv_far`]) and into the closest hit it compares them with, so that a
+/// planes ([`RayBox::ninv_far`]) and into the closest hit it compares them with, so that a
 /// node's test has no multiply after its reductions (the exit's chain is then as long as the
 /// entry's). A far distance `(plane - o) * (inv * FAR_EPS)` takes four roundings (the
 /// difference, the reciprocal, its widening, the product: within a factor `1 - gamma(4)` of
@@ -153,8 +153,11 @@ const W: usize = NODE_WIDTH;
 struct RayBox {
     org: [f32; 3],
     inv: [f32; 3],
-    /// `inv * FAR_EPS`: the reciprocals the far planes are scaled by ([`FAR_EPS`]).
-    inv_far: [f32; 3],
+    /// `-inv`: the box tests' distances are `(o - plane) * -inv` ([`RayBox::test_avx2`]).
+    /// Negated once per ray, so that the kernel broadcasts them from memory as they are.
+    ninv: [f32; 3],
+    /// `-inv * FAR_EPS`: the reciprocals the far planes are scaled by ([`FAR_EPS`]).
+    ninv_far: [f32; 3],
     /// Byte offsets in a [`Node8`] of the rows ([`Node8::planes`]) of the near planes of x, y
     /// and z, then of the far planes: `32 * row`, the row of a far plane being the other one
     /// of its pair. Always one of 0, 32, .., 160 (the AVX test reads through them unchecked).
@@ -182,18 +185,23 @@ impl RayBox {
         let d = Vec3A::from(r.dir);
         let fixed = d.abs().max(Vec3A::splat(1e-20)).copysign(d);
         let inv = Vec3A::ONE / fixed;
-        let inv_far = (inv * FAR_EPS).to_array();
-        RayBox { org: r.org.into(), inv: inv.to_array(), inv_far, rows: &ROWS[RayBox::octant(r)] }
+        // (Negation is exact: `-(inv * FAR_EPS)` is `-inv * FAR_EPS`, bit for bit.)
+        let ninv = -inv;
+        RayBox {
+            org: r.org.into(),
+            inv: inv.to_array(),
+            ninv: ninv.to_array(),
+            ninv_far: (ninv * FAR_EPS).to_array(),
+            rows: &ROWS[d.is_negative_bitmask() as usize & 7],
+        }
     }
 
     /// The ray's octant: bit `k` set when the direction's component `k` is negative (its
-    /// sign bit set: `-0.0` is negative, as its reciprocal in [`RayBox::new`] is).
+    /// sign bit set: `-0.0` is negative, as its reciprocal in [`RayBox::new`] is). One
+    /// `movmskps` of the direction's sign bits.
     #[inline(always)]
     fn octant(r: &Ray) -> usize {
-        let d = r.dir;
-        d.x.is_sign_negative() as usize
-            | (d.y.is_sign_negative() as usize) << 1
-            | (d.z.is_sign_negative() as usize) << 2
+        Vec3A::from(r.dir).is_negative_bitmask() as usize & 7
     }
 
     /// [`RayBox::rows`] of rays in octant `oct`: the near plane of an axis is its high one
@@ -289,7 +297,7 @@ impl RayBox {
         // only by `RayBox::new`).
         let ld = |k: usize, far: usize| unsafe { _mm256_loadu_ps(base.add(self.rows[3 * far + k]).cast::<f32>()) };
         let o = self.org.map(|x| _mm256_set1_ps(x));
-        let ninv = [self.inv.map(|x| _mm256_set1_ps(-x)), self.inv_far.map(|x| _mm256_set1_ps(-x))];
+        let ninv = [self.ninv.map(|x| _mm256_set1_ps(x)), self.ninv_far.map(|x| _mm256_set1_ps(x))];
         let q =
             |k: usize, far: usize| _mm256_castps_si256(_mm256_mul_ps(_mm256_sub_ps(o[k], ld(k, far)), ninv[far][k]));
         let splat = |t: f32| _mm256_castps_si256(_mm256_set1_ps(t));
@@ -316,7 +324,7 @@ impl RayBox {
         let (nx, ny, nz) = (row(0, 0), row(1, 0), row(2, 0));
         let (fx, fy, fz) = (row(0, 1), row(1, 1), row(2, 1));
         let o = self.org.map(Vec4::splat);
-        let ninv = [self.inv.map(|x| Vec4::splat(-x)), self.inv_far.map(|x| Vec4::splat(-x))];
+        let ninv = [self.ninv.map(Vec4::splat), self.ninv_far.map(Vec4::splat)];
         let (t0, t1) = (Vec4::splat(t0), Vec4::splat(t1));
         // Slots 0..4, then 4..8: one 4-wide half at a time.
         let half = |h: usize| {
@@ -379,16 +387,20 @@ fn corners(v: &Block, lane: usize) -> [[f32; 3]; 3] {
     [[v[0][lane], v[1][lane], v[2][lane]], [v[3][lane], v[4][lane], v[5][lane]], [v[6][lane], v[7][lane], v[8][lane]]]
 }
 
-/// Row `k` (an axis) of corner `c` of block `b`: the four lanes' coordinate `k` of
-/// their corner `c`, without a bounds check.
+/// The row of axis `k` of corner `c` of block `b` (the four lanes' coordinate `k` of their
+/// corner `c`), given `kb = 16 * k`, the row's byte offset within its corner: so that a
+/// row read by the ray's axes is one load at `b + kb + 48 * c` (the ray's `kb` in a
+/// register, the corner's offset a constant), with no index arithmetic per block or per
+/// ray. No bounds check.
 ///
 /// # Safety
-/// `c` and `k` must be below 3 (then `3 * c + k` is one of the block's nine rows).
+/// `c` must be below 3 and `kb` one of 0, 16, 32 (then the row is one of the block's nine).
 #[inline(always)]
-unsafe fn row(b: &Block, c: usize, k: usize) -> [f32; 4] {
-    debug_assert!(c < 3 && k < 3);
-    // SAFETY: 3 * c + k <= 8 (the caller's promise), an index of the nine rows.
-    unsafe { *b.get_unchecked(3 * c + k) }
+unsafe fn row(b: &Block, c: usize, kb: usize) -> [f32; 4] {
+    debug_assert!(c < 3 && kb < 48 && kb.is_multiple_of(16));
+    // SAFETY: 48 * c + kb <= 128 (the caller's promise): the start of one of the nine
+    // 16-byte rows of `b`, aligned as `b` is.
+    unsafe { b.as_ptr().cast::<u8>().add(48 * c + kb).cast::<[f32; 4]>().read() }
 }
 
 /// A block that [`RayTri4::try_test`] leaves to the double-precision reference.
@@ -406,8 +418,9 @@ struct RayTri4 {
     ray: Ray,
     /// The dominant axis: the kernel's rows are `kx = kz + 1`, `ky = kz + 2` (mod 3).
     kz: usize,
-    /// `[kx, ky, kz]`, for the test that reads its rows by them ([`RayTri4::try_test_dyn`]).
-    k: [usize; 3],
+    /// `16 * [kx, ky, kz]`: the byte offsets of their rows in a corner of a block ([`row`]),
+    /// for the test that reads its rows by the ray's axes ([`RayTri4::try_test_dyn`]).
+    kb: [usize; 3],
     /// The shear: `d[kx] / d[kz]`, `d[ky] / d[kz]`, `1 / d[kz]`.
     s: [Vec4; 3],
     /// The origin's `kx`, `ky`, `kz` components, for [`RayTri4::try_test_dyn`].
@@ -419,6 +432,44 @@ struct RayTri4 {
 
 /// `[kx, ky, kz]` of each dominant axis `kz`: `kx = kz + 1`, `ky = kz + 2` (mod 3).
 const AXES: [[usize; 3]; 3] = [[1, 2, 0], [2, 0, 1], [0, 1, 2]];
+
+/// [`AXES`] as byte offsets of rows within a corner of a block ([`row`]).
+const AXES_BYTES: [[usize; 3]; 3] = [[16, 32, 0], [32, 0, 16], [0, 16, 32]];
+const _: () = {
+    let mut kz = 0;
+    while kz < 3 {
+        let mut j = 0;
+        while j < 3 {
+            assert!(AXES_BYTES[kz][j] == 16 * AXES[kz][j]);
+            j += 1;
+        }
+        kz += 1;
+    }
+};
+
+/// The dominant axis ([`RayTri4::dominant`]) for each outcome of its three comparisons:
+/// bit 0 `|x| > |y|`, bit 1 `|x| > |z|`, bit 2 `|y| > |z|`. x when above y and z, else y
+/// when above z, else z.
+const DOMINANT: [u8; 8] = {
+    let mut t = [0; 8];
+    let mut m = 0;
+    while m < 8 {
+        let (xy, xz, yz) = (m & 1 != 0, m & 2 != 0, m & 4 != 0);
+        t[m] = if xy && xz {
+            0
+        } else if !xy && yz {
+            1
+        } else {
+            2
+        };
+        m += 1;
+    }
+    t
+};
+
+/// [`AXES`] as the lane indices of a vector permute (`vpermilps`), the fourth lane unused.
+#[cfg(target_arch = "x86_64")]
+const PERMUTE: [[i32; 4]; 3] = [[1, 2, 0, 3], [2, 0, 1, 3], [0, 1, 2, 3]];
 
 /// The axis parameter of [`RayTri4::test_k`] and [`RayTri4::test8_k`] that reads the rows
 /// by the ray's axes.
@@ -471,10 +522,10 @@ impl RayTri4 {
     /// (diffuse bounces), whose choices would mispredict.
     #[inline(always)]
     fn dominant_unbranched(r: &Ray) -> usize {
-        let ad = r.dir.abs();
-        let (xy, xz, yz) = (ad.x > ad.y, ad.x > ad.z, ad.y > ad.z);
-        // x when above y and z, else y when above z, else z (`dominant`'s choices).
-        2 - 2 * (xy & xz) as usize - (!xy & yz) as usize
+        // `dominant`'s three comparisons at once, `(x, x, y) > (y, z, z)`, as the bits of a
+        // `movmskps` (a NaN compares false in both), then its choices for each outcome.
+        let ad = Vec3A::from(r.dir).abs();
+        DOMINANT[ad.xxy().cmpgt(ad.yzz()).bitmask() as usize & 7] as usize
     }
 
     /// [`RayTri4::with_inv`] for dominant axis `kz` (permuting by a branch on it: for rays
@@ -502,6 +553,48 @@ impl RayTri4 {
         RayTri4::with_shear(r, kz, (d[kx], d[ky], d[kz], inv[kz]))
     }
 
+    /// [`RayTri4::with_axis_unbranched`] by vector permutes (one per vector of the ray's,
+    /// by its axes' [`PERMUTE`]; one per splat), where the scalar form goes through the
+    /// machine stack to index the ray's arrays. The same products, so the same constants
+    /// (tested). With the dominant axis by one comparison of vectors and the rows as byte
+    /// offsets ([`row`]), the generic AVX-512 kernel's set-up went from 203 to 152
+    /// instructions (objdump), and callgrind (AVX2 path, stanford-bunny@close diffuse_1)
+    /// counts 1067 -> 1012 instructions per ray.
+    ///
+    /// # Safety
+    /// The CPU must have AVX (inlined into the AVX kernels, as [`RayTri4::test8_k`] is).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn with_axis_avx(r: &Ray, inv: Vec3A) -> RayTri4 {
+        use std::arch::x86_64::*;
+        let kz = RayTri4::dominant_unbranched(r);
+        // SAFETY: `kz` is below 3 (`dominant_unbranched`); a row of `PERMUTE` is 16 bytes.
+        let (dp, ip, op) = unsafe {
+            let idx = _mm_loadu_si128(PERMUTE.get_unchecked(kz).as_ptr().cast());
+            let perm = |v: Vec3A| _mm_permutevar_ps(v.into(), idx);
+            (perm(Vec3A::from(r.dir)), perm(inv), perm(Vec3A::from(r.org)))
+        };
+        let dz = _mm_cvtss_f32(_mm_permute_ps::<0xaa>(dp));
+        // As in `with_shear`: `inv[kz]` wherever `RayBox` left the component as it was.
+        let sz = if dz.abs() >= 1e-20 { _mm_permute_ps::<0xaa>(ip) } else { _mm_set1_ps(1.0 / dz) };
+        let sxy = _mm_mul_ps(dp, sz);
+        let splat = |v: __m128, lane: i32| {
+            Vec4::from(match lane {
+                0 => _mm_permute_ps::<0x00>(v),
+                1 => _mm_permute_ps::<0x55>(v),
+                _ => _mm_permute_ps::<0xaa>(v),
+            })
+        };
+        RayTri4 {
+            kz,
+            kb: AXES_BYTES[kz],
+            s: [splat(sxy, 0), splat(sxy, 1), Vec4::from(sz)],
+            ok: [splat(op, 0), splat(op, 1), splat(op, 2)],
+            own: Splats { o: r.org.to_array().map(Vec4::splat), t_min: Vec4::splat(t_start(r.t_min)) },
+            ray: *r,
+        }
+    }
+
     /// The constants of axis `kz` given `(d[kx], d[ky], d[kz], inv[kz])`.
     #[inline(always)]
     fn with_shear(r: &Ray, kz: usize, (dx, dy, dz, iz): (f32, f32, f32, f32)) -> RayTri4 {
@@ -512,7 +605,7 @@ impl RayTri4 {
         let o = r.org.to_array();
         RayTri4 {
             kz,
-            k,
+            kb: AXES_BYTES[kz],
             s: [Vec4::splat(dx * sz), Vec4::splat(dy * sz), Vec4::splat(sz)],
             ok: k.map(|a| Vec4::splat(o[a])),
             // A negative `t_min` counts as 0 ([`Ray::t_min`]).
@@ -550,14 +643,14 @@ impl RayTri4 {
         self.test_k::<DYN_AXES>(sp, b, lanes, t_max)
     }
 
-    /// The rows `[kx, ky, kz]` of dominant axis `KZ` and the origin's components in that
-    /// order: constants (`AXES`) and the shared splats for an axis below 3, the ray's own
-    /// for [`DYN_AXES`].
+    /// The rows `[kx, ky, kz]` of dominant axis `KZ` (as [`row`]'s byte offsets) and the
+    /// origin's components in that order: constants (`AXES_BYTES`) and the shared splats
+    /// for an axis below 3, the ray's own for [`DYN_AXES`].
     #[inline(always)]
     fn axes<const KZ: usize>(&self, sp: &Splats) -> ([usize; 3], [Vec4; 3]) {
         match KZ {
-            0..3 => (AXES[KZ], AXES[KZ].map(|a| sp.o[a])),
-            _ => (self.k, self.ok),
+            0..3 => (AXES_BYTES[KZ], AXES[KZ].map(|a| sp.o[a])),
+            _ => (self.kb, self.ok),
         }
     }
 
@@ -626,8 +719,8 @@ impl RayTri4 {
         let [kx, ky, kz] = k;
         let t_min = sp.t_min;
         // Row `k` of corner `c`: block 0's four lanes low, block 1's high.
-        // SAFETY (`row`): `c` is a constant below 3 and `k` one of `k`'s, axes below 3
-        // (from `AXES`, as `RayTri4::k` is).
+        // SAFETY (`row`): `c` is a constant below 3 and `k` one of `axes`'s offsets, each
+        // 0, 16 or 32 (from `AXES_BYTES`, as `RayTri4::kb` is).
         let v = |c: usize, k: usize| {
             let (lo, hi) = unsafe { (Vec4::from_array(row(b0, c, k)), Vec4::from_array(row(b1, c, k))) };
             _mm256_insertf128_ps::<1>(_mm256_castps128_ps256(lo.into()), hi.into())
@@ -711,8 +804,8 @@ impl RayTri4 {
         let ([kx, ky, kz], [ox, oy, oz]) = self.axes::<KZ>(sp);
         let t_min = sp.t_min;
         let [sx, sy, sz] = self.s;
-        // SAFETY (`row`): `c` is a constant below 3 and `k` one of `k`'s, axes below 3
-        // (from `AXES`, as `RayTri4::k` is).
+        // SAFETY (`row`): `c` is a constant below 3 and `k` one of `axes`'s offsets, each
+        // 0, 16 or 32 (from `AXES_BYTES`, as `RayTri4::kb` is).
         let v = |c: usize, k: usize| Vec4::from_array(unsafe { row(b, c, k) });
         let az = v(0, kz) - oz;
         let bz = v(1, kz) - oz;
@@ -1584,8 +1677,13 @@ impl<'s> Tracer<'s> {
         }
         // The generic kernel (`walk_on`) reads the triangles' rows by the ray's axes: no
         // choice by them, per ray or per block.
-        let rt =
-            if OCT == GENERIC { RayTri4::with_axis_unbranched(ray, &rb.inv) } else { RayTri4::with_inv(ray, &rb.inv) };
+        let rt = match OCT {
+            // SAFETY: `AVX` kernels run only on CPUs with AVX2 (`Tracer::kernel_table`).
+            #[cfg(target_arch = "x86_64")]
+            GENERIC if AVX => unsafe { RayTri4::with_axis_avx(ray, Vec3A::from_array(rb.inv)) },
+            GENERIC => RayTri4::with_axis_unbranched(ray, &rb.inv),
+            _ => RayTri4::with_inv(ray, &rb.inv),
+        };
         let shared = rb.splats::<AVX>(t_min);
         let mut c = w.c;
         let mut sp = w.sp;
@@ -2067,8 +2165,14 @@ mod tests {
                     let inv = RayBox::new(&ray).inv;
                     let (a, b) = (RayTri4::with_axis(&ray, &inv, kz), RayTri4::with_axis_unbranched(&ray, &inv));
                     let bits =
-                        |r: &RayTri4| (r.kz, r.k, [r.s, r.ok].map(|v| v.map(|l| l.to_array().map(f32::to_bits))));
+                        |r: &RayTri4| (r.kz, r.kb, [r.s, r.ok].map(|v| v.map(|l| l.to_array().map(f32::to_bits))));
                     assert_eq!(bits(&a), bits(&b), "{ray:?}");
+                    #[cfg(target_arch = "x86_64")]
+                    if std::arch::is_x86_feature_detected!("avx") {
+                        // SAFETY: the CPU has AVX (just checked).
+                        let c = unsafe { RayTri4::with_axis_avx(&ray, Vec3A::from_array(inv)) };
+                        assert_eq!(bits(&a), bits(&c), "{ray:?}");
+                    }
                 }
             }
         }
