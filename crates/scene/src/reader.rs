@@ -58,6 +58,57 @@ pub struct Scene {
     tiles_ok: AtomicU32,
     first_error: Mutex<Option<SceneError>>,
     materials: Vec<MaterialDesc>,
+    /// Which tile a triangle block lies in ([`Scene::tile_of_unit`]).
+    tile_index: TileIndex,
+}
+
+/// The tiles by position in the file, for [`Scene::tile_of_unit`]: the file cut into
+/// buckets of `1 << shift` 16-byte units, and for each the last tile whose blocks start at or
+/// before the bucket's start (tiles lie in file order, [`Scene::open`] checks), and where
+/// each tile's blocks start (`TileEntry::unit0`, read here rather than through the mapped
+/// directory). The buckets are as many as four per tile (and at least 4 KiB each): 24 bytes
+/// per tile at most, and a tile's lookup one load and, mostly, a comparison or two.
+struct TileIndex {
+    shift: u32,
+    first: Vec<u32>,
+    unit0: Vec<u64>,
+}
+
+impl TileIndex {
+    fn new(tiles: &[TileEntry], file_bytes: u64) -> TileIndex {
+        let units = file_bytes / 16 + 1;
+        let most = 4 * tiles.len() as u64 + 64;
+        let mut shift = 8; // 4 KiB
+        while units >> shift > most {
+            shift += 1;
+        }
+        let buckets = (units >> shift) + 1;
+        let mut first = Vec::with_capacity(buckets as usize);
+        let mut t = 0;
+        for b in 0..buckets {
+            while t + 1 < tiles.len() && tiles[t + 1].unit0() <= b << shift {
+                t += 1;
+            }
+            first.push(t as u32);
+        }
+        TileIndex { shift, first, unit0: tiles.iter().map(TileEntry::unit0).collect() }
+    }
+
+    /// [`Scene::tile_of_unit`].
+    #[inline]
+    fn tile_of(&self, unit: u64) -> u32 {
+        let TileIndex { shift, first, unit0 } = self;
+        let b = ((unit >> shift) as usize).min(first.len().saturating_sub(1));
+        // The tile holding `unit` is one of those from the last to start before its bucket
+        // to the last to start before the next bucket.
+        let (lo, hi) = match (first.get(b), first.get(b + 1)) {
+            (Some(&lo), Some(&hi)) => (lo as usize, hi as usize),
+            (Some(&lo), None) => (lo as usize, unit0.len().saturating_sub(1)),
+            _ => return 0,
+        };
+        let Some(starts) = unit0.get(lo..=hi.max(lo)) else { return 0 };
+        (lo + starts.partition_point(|&u| u <= unit).saturating_sub(1)) as u32
+    }
 }
 
 /// The nodes and triangle blocks of one tile.
@@ -177,9 +228,12 @@ impl Scene {
             materials,
             header,
             map,
+            tile_index: TileIndex { shift: 63, first: Vec::new(), unit0: Vec::new() },
         };
         scene.check_tables()?;
-        Ok(scene)
+        // (After the check: the index relies on the tiles lying in file order.)
+        let tile_index = TileIndex::new(scene.tiles(), len);
+        Ok(Scene { tile_index, ..scene })
     }
 
     fn check_tables(&self) -> Result<(), SceneError> {
@@ -231,7 +285,13 @@ impl Scene {
         if tri_total != h.tri_count {
             return Err(bad(format!("parts hold {tri_total} triangles, header says {}", h.tri_count)));
         }
+        let mut end = 0;
         for (i, t) in tiles.iter().enumerate() {
+            // In file order, none overlapping the one before ([`Scene::tile_of_unit`]).
+            if t.offset < end {
+                return Err(bad(format!("tile {i}: out of file order (starts before the end of the tile before it)")));
+            }
+            end = t.offset.saturating_add(t.bytes as u64);
             let expect = t.node_count as u64 * NODE_BYTES as u64 + t.blocks as u64 * 144;
             let part = self.parts().get(t.part as usize);
             if !t.offset.is_multiple_of(PAGE)
@@ -382,6 +442,15 @@ impl Scene {
             }
         }
         Some(out)
+    }
+
+    /// The tile whose triangle blocks hold the block at `unit` (its byte offset / 16), for
+    /// a hit's block: the tile that holds `unit` if any does, some tile otherwise. A lookup
+    /// in an index made at [`Scene::open`], and a binary search of the few tiles that start
+    /// in `unit`'s bucket of the file.
+    #[inline]
+    pub fn tile_of_unit(&self, unit: u64) -> u32 {
+        self.tile_index.tile_of(unit)
     }
 
     /// The tile holding triangle slot `slot` of part `part` (its attributes are counted with
@@ -594,5 +663,61 @@ impl Scene {
         }
         let id: u32 = self.attr(p.materials_off, prim);
         self.materials.get(id as usize)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Tiles of random sizes, page-aligned one after another (some of a single page, many
+    /// in a bucket when the buckets are large): every block unit of every tile is found in
+    /// its tile, as a search of the whole directory finds it.
+    #[test]
+    fn tile_index_finds_the_tile_of_every_block() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rand = |n: u64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % n
+        };
+        for count in [1usize, 2, 7, 100, 1000] {
+            let mut tiles = Vec::new();
+            let mut offset = PAGE;
+            for _ in 0..count {
+                // Mostly small tiles, now and then a large one (buckets then hold many small).
+                let (nodes, blocks) = match rand(10) {
+                    0 => (1 + rand(400) as u32, 1 + rand(20_000) as u32),
+                    _ => (1 + rand(3) as u32, 1 + rand(40) as u32),
+                };
+                let bytes = nodes * NODE_BYTES as u32 + blocks * 144;
+                tiles.push(TileEntry {
+                    offset,
+                    bytes,
+                    node_count: nodes,
+                    blocks,
+                    part: 0,
+                    first_slot: 0,
+                    reserved: 0,
+                    checksum: 0,
+                });
+                offset = (offset + bytes as u64).div_ceil(PAGE) * PAGE;
+            }
+            let index = TileIndex::new(&tiles, offset);
+            assert!(index.first.len() <= 4 * count + 66, "{} buckets for {count} tiles", index.first.len());
+            for (t, e) in tiles.iter().enumerate() {
+                for b in [0, 1, e.blocks / 2, e.blocks - 1] {
+                    let unit = e.unit0() + 9 * b as u64;
+                    let want = tiles.partition_point(|x| x.unit0() <= unit) - 1;
+                    assert_eq!(want, t);
+                    assert_eq!(index.tile_of(unit), t as u32, "{count} tiles: block {b} of tile {t}");
+                }
+            }
+            // Outside every tile's blocks (the header page, past the end): some tile, no panic.
+            for unit in [0, 1, offset / 16, u64::MAX] {
+                assert!((index.tile_of(unit) as usize) < count);
+            }
+        }
     }
 }

@@ -60,7 +60,7 @@ fn write_scene(path: &Path) {
 /// only the reference is wrong).
 fn patch(path: &Path, tile: Option<usize>, node: usize, slot: usize, r: u64) {
     let mut b = std::fs::read(path).unwrap();
-    let mut h: Header = bytemuck::pod_read_unaligned(&b[..256]);
+    let h: Header = bytemuck::pod_read_unaligned(&b[..256]);
     let base = match tile {
         Some(tile) => {
             let te = h.tiles_off as usize + 40 * tile;
@@ -77,6 +77,13 @@ fn patch(path: &Path, tile: Option<usize>, node: usize, slot: usize, r: u64) {
         e.checksum = xxhash_rust::xxh3::xxh3_64(&b[e.offset as usize..e.offset as usize + e.bytes as usize]);
         b[te..te + 40].copy_from_slice(bytemuck::bytes_of(&e));
     }
+    fix_checksums(&mut b);
+    std::fs::write(path, b).unwrap();
+}
+
+/// Makes the tables' checksum and the header's right again for the file `b`.
+fn fix_checksums(b: &mut [u8]) {
+    let mut h: Header = bytemuck::pod_read_unaligned(&b[..256]);
     let mut meta = Vec::new();
     for (off, len) in [
         (h.top_nodes_off, h.top_node_count as u64 * 256),
@@ -90,7 +97,6 @@ fn patch(path: &Path, tile: Option<usize>, node: usize, slot: usize, r: u64) {
     b[..256].copy_from_slice(bytemuck::bytes_of(&h));
     h.header_checksum = xxhash_rust::xxh3::xxh3_64(&b[..248]);
     b[..256].copy_from_slice(bytemuck::bytes_of(&h));
-    std::fs::write(path, b).unwrap();
 }
 
 /// A copy of `good` named `name` beside it, with child `slot` of node `node` of `tile`
@@ -209,4 +215,34 @@ fn huge_page_advice_keeps_the_scene_intact() {
     assert_eq!(scene.bytes(), &before[..]);
     scene.advise_random().unwrap();
     assert_eq!(scene.bytes(), &before[..]);
+}
+
+/// Tiles out of file order (the directory's second entry moved onto the first's offset,
+/// everything else consistent) are refused at open, with the file and the tile named: the tracer finds a
+/// hit's tile by its position ([`Scene::tile_of_unit`]), which needs them in order.
+#[test]
+fn tiles_out_of_file_order_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = good_scene(dir.path());
+    let scene = Scene::open(&good).unwrap();
+    // A hit's tile by its block's position: each block of each tile.
+    for (i, t) in scene.tiles().iter().enumerate() {
+        for b in 0..t.blocks as u64 {
+            assert_eq!(scene.tile_of_unit(t.unit0() + 9 * b), i as u32);
+        }
+    }
+    drop(scene);
+    let p = dir.path().join("overlap.mray");
+    let mut b = std::fs::read(&good).unwrap();
+    let h: Header = bytemuck::pod_read_unaligned(&b[..256]);
+    let at = |t: usize| h.tiles_off as usize + 40 * t;
+    let e0: TileEntry = bytemuck::pod_read_unaligned(&b[at(0)..at(0) + 40]);
+    let mut e1: TileEntry = bytemuck::pod_read_unaligned(&b[at(1)..at(1) + 40]);
+    e1.offset = e0.offset;
+    b[at(1)..at(1) + 40].copy_from_slice(bytemuck::bytes_of(&e1));
+    fix_checksums(&mut b);
+    std::fs::write(&p, b).unwrap();
+    let e = Scene::open(&p).err().expect("tiles out of order should be refused");
+    let msg = e.to_string();
+    assert!(msg.contains("overlap.mray") && msg.contains("tile 1") && msg.contains("file order"), "{msg}");
 }

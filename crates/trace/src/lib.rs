@@ -1158,7 +1158,7 @@ impl<'s> Tracer<'s> {
     fn slots(&self, arr: u32, unit: u64) -> (u32, u32) {
         // A hit of a walk that kept no tile ([`Tracer::walk`]): the tile whose blocks hold it
         // (tiles lie in file order).
-        let arr = if arr == TOP { self.tiles.partition_point(|t| t.unit0() <= unit) as u32 - 1 } else { arr };
+        let arr = if arr == TOP { self.scene.tile_of_unit(unit) } else { arr };
         let e = &self.tiles[arr as usize];
         (e.part, e.first_slot + 4 * ((unit - e.unit0()) / 9) as u32)
     }
@@ -1648,9 +1648,11 @@ impl<'s> Tracer<'s> {
     /// Entries popped from a tile other than the open one reopen it without a check on an
     /// unpaged tracer: the traversal entered it through a link before. With `ALL` (every
     /// tile checked, [`Tracer::all_checked`]) there is nothing to check at all: a link is
-    /// an inner node whose tile goes into `c`, and a pop moves its entry's tile into `c`;
-    /// an any-hit walk does not even do that: its `c` stays [`TOP`], and a hit it finds is
-    /// credited to its tile when made a [`Hit`] (if ever: `occluded` needs none).
+    /// followed as an inner node is, and no tile is kept: `c` stays [`TOP`], and a hit is
+    /// credited to its tile when made a [`Hit`] (if ever: `occluded` needs none), from its
+    /// block's position ([`Scene::tile_of_unit`]: one lookup per hit, where keeping the
+    /// tile cost six instructions per node, the tile of every link chosen without a branch
+    /// and that of every popped entry moved in).
     #[inline(always)]
     fn walk<const AVX: bool, const ANY: bool, const ALL: bool, const OCT: usize>(
         &self,
@@ -1712,11 +1714,7 @@ impl<'s> Tracer<'s> {
             // have been evicted while the ray was pending: the pager is asked again (a ray
             // needs one tile at a time). (A link or part names its own tile.)
             if ALL {
-                // Every tile is checked: the popped entry's tile is open by moving its name
-                // (an any-hit walk keeps none, [`Tracer::walk`]).
-                if !ANY {
-                    c = e.arr;
-                }
+                // Every tile is checked: nothing to open, and no tile kept ([`Tracer::walk`]).
             } else if (e.r as i64) >= 0 && e.arr != c {
                 if self.pager.is_none() || e.arr == TOP {
                     c = e.arr;
@@ -1735,13 +1733,7 @@ impl<'s> Tracer<'s> {
                 // References hold absolute positions: no tile needs looking up to follow one.
                 let leaf_or_part = r & (1 << 62) != 0;
                 let node = if ALL && !leaf_or_part {
-                    // Every tile checked: an inner node, or a link that opens its tile by
-                    // naming it (chosen without a branch: inner nodes and links come mixed).
-                    if !ANY {
-                        let link = ((r as i64) >> 63) as u32;
-                        let tile = ((r >> 36) as u32) & ChildRef::MAX_TILE;
-                        c = (c & !link) | (tile & link);
-                    }
+                    // Every tile checked: an inner node, or a link, followed alike.
                     r & ChildRef::MAX_NODE
                 } else if (r as i64) >= 0 {
                     if leaf_or_part {
