@@ -5,7 +5,7 @@
 use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, AtomicU8, Ordering};
-use std::sync::Mutex;
+use std::sync::{Mutex, OnceLock};
 
 use memmap2::Mmap;
 
@@ -58,8 +58,10 @@ pub struct Scene {
     tiles_ok: AtomicU32,
     first_error: Mutex<Option<SceneError>>,
     materials: Vec<MaterialDesc>,
-    /// Which tile a triangle block lies in ([`Scene::tile_of_unit`]).
-    tile_index: TileIndex,
+    /// Which tile a triangle block lies in ([`Scene::tile_of_unit`]): made at the first
+    /// lookup, so that a scene that never needs one (a paged tracer keeps its tile) holds
+    /// none.
+    tile_index: OnceLock<TileIndex>,
 }
 
 /// The tiles by position in the file, for [`Scene::tile_of_unit`]: the file cut into
@@ -228,12 +230,10 @@ impl Scene {
             materials,
             header,
             map,
-            tile_index: TileIndex { shift: 63, first: Vec::new(), unit0: Vec::new() },
+            tile_index: OnceLock::new(),
         };
         scene.check_tables()?;
-        // (After the check: the index relies on the tiles lying in file order.)
-        let tile_index = TileIndex::new(scene.tiles(), len);
-        Ok(Scene { tile_index, ..scene })
+        Ok(scene)
     }
 
     fn check_tables(&self) -> Result<(), SceneError> {
@@ -446,11 +446,12 @@ impl Scene {
 
     /// The tile whose triangle blocks hold the block at `unit` (its byte offset / 16), for
     /// a hit's block: the tile that holds `unit` if any does, some tile otherwise. A lookup
-    /// in an index made at [`Scene::open`], and a binary search of the few tiles that start
-    /// in `unit`'s bucket of the file.
+    /// in an index made at the first call (from the tile directory, which [`Scene::open`]
+    /// checked to be in file order), and a binary search of the few tiles that start in
+    /// `unit`'s bucket of the file.
     #[inline]
     pub fn tile_of_unit(&self, unit: u64) -> u32 {
-        self.tile_index.tile_of(unit)
+        self.tile_index.get_or_init(|| TileIndex::new(self.tiles(), self.map.len() as u64)).tile_of(unit)
     }
 
     /// The tile holding triangle slot `slot` of part `part` (its attributes are counted with
