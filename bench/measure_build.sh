@@ -10,8 +10,8 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 TRIS=${TRIS:-100M}
 MEMS=${MEMS:-"1G 4G"}
 DIR=${DIR:-$root/big}
-cargo build --release -q -p megaray --manifest-path "$root/Cargo.toml" || exit 1
-M=$root/target/release/megaray
+cargo build --profile dist -q -p megaray --manifest-path "$root/Cargo.toml" || exit 1
+M=$root/target/dist/megaray
 mkdir -p "$DIR" && cd "$DIR" || exit 1
 drop() { sync; echo 3 > /proc/sys/vm/drop_caches 2>/dev/null || echo "(could not drop caches: figures are warm)"; }
 ply=plant$TRIS.ply

@@ -14,9 +14,9 @@ SCENE=${SCENE:?set SCENE to a .mray file}
 MEM=${MEM:-2G}
 RES=${RES:-1024x768}
 OUT=${OUT:-$(dirname "$SCENE")}
-cargo build --release -q -p megaray --manifest-path "$root/Cargo.toml" || exit 1
-cargo build --release -q -p megaray-page --example load_paths --manifest-path "$root/Cargo.toml" || exit 1
-M=$root/target/release/megaray
+cargo build --profile dist -q -p megaray --manifest-path "$root/Cargo.toml" || exit 1
+cargo build --profile dist -q -p megaray-page --example load_paths --manifest-path "$root/Cargo.toml" || exit 1
+M=$root/target/dist/megaray
 drop() { sync; echo 3 > /proc/sys/vm/drop_caches 2>/dev/null || echo "(could not drop caches: figures are warm)"; }
 echo "scene $(ls -la "$SCENE" | awk '{print $5}') bytes; loadavg $(cut -d' ' -f1-3 /proc/loadavg)"
 # Two views: the default camera (the whole plant: a frame needs several times a 2G budget)
@@ -50,4 +50,4 @@ for run in "deadline:$RES:${DEADLINE:-500}:" "full:$RES:none:" "inside:$RES:none
   grep -E "Elapsed|Maximum resident" "$OUT/path-$name.time"
 done
 echo "== tile load paths, cold"
-"$root/target/release/examples/load_paths" "$SCENE" 4000 1,2,8,16
+"$root/target/dist/examples/load_paths" "$SCENE" 4000 1,2,8,16

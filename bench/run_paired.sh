@@ -27,8 +27,8 @@ MIN_MS=${MIN_MS:-200}
 TRACE=primary_1,primary_16,shadow_1,diffuse_1
 [ -x "$PEER" ] || { echo "no peer harness at $PEER (make -C $SHARED/peers/embree, or set PEER)" >&2; exit 2; }
 
-cargo build --release -p megaray
-bin=$root/target/release/megaray
+cargo build --profile dist -p megaray
+bin=$root/target/dist/megaray
 mkdir -p "$OUT_DIR/rounds"
 rm -f "$OUT_DIR"/rounds/*.jsonl
 

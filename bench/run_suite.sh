@@ -21,8 +21,8 @@ MIN_MS=${MIN_MS:-200}
 THREADS=${THREADS:-1,2}
 TRACE=primary_1,primary_16,shadow_1,diffuse_1
 
-cargo build --release -p megaray
-bin=$root/target/release/megaray
+cargo build --profile dist -p megaray
+bin=$root/target/dist/megaray
 mkdir -p "$(dirname "$OUT")"
 : > "$OUT"
 
