@@ -66,15 +66,27 @@ pub struct Scene {
 
 /// The tiles by position in the file, for [`Scene::tile_of_unit`]: the file cut into
 /// buckets of `1 << shift` 16-byte units, and for each the last tile whose blocks start at or
-/// before the bucket's start (tiles lie in file order, [`Scene::open`] checks), and where
-/// each tile's blocks start (`TileEntry::unit0`, read here rather than through the mapped
-/// directory). The buckets are as many as four per tile (and at least 4 KiB each): 24 bytes
-/// per tile at most, and a tile's lookup one load and, mostly, a comparison or two.
+/// before the bucket's start (tiles lie in file order, [`Scene::open`] checks), and per tile
+/// where its blocks start, its part and its first slot ([`Placed`], read here rather than
+/// through the mapped directory). The buckets are as many as four per tile (and at least
+/// 4 KiB each): 32 bytes per tile at most, and a tile's lookup one load and, mostly, one
+/// comparison.
 struct TileIndex {
     shift: u32,
     first: Vec<u32>,
-    unit0: Vec<u64>,
+    tiles: Vec<Placed>,
 }
+
+/// What a hit needs of its tile ([`Scene::slot_of_unit`]). 16 bytes.
+#[derive(Clone, Copy, Debug)]
+struct Placed {
+    /// `TileEntry::unit0`: where its blocks start.
+    unit0: u64,
+    part: u32,
+    first_slot: u32,
+}
+
+const _: () = assert!(std::mem::size_of::<Placed>() == 16);
 
 impl TileIndex {
     fn new(tiles: &[TileEntry], file_bytes: u64) -> TileIndex {
@@ -93,23 +105,35 @@ impl TileIndex {
             }
             first.push(t as u32);
         }
-        TileIndex { shift, first, unit0: tiles.iter().map(TileEntry::unit0).collect() }
+        let tiles = tiles.iter().map(|e| Placed { unit0: e.unit0(), part: e.part, first_slot: e.first_slot }).collect();
+        TileIndex { shift, first, tiles }
     }
 
     /// [`Scene::tile_of_unit`].
     #[inline]
     fn tile_of(&self, unit: u64) -> u32 {
-        let TileIndex { shift, first, unit0 } = self;
+        let TileIndex { shift, first, tiles } = self;
         let b = ((unit >> shift) as usize).min(first.len().saturating_sub(1));
         // The tile holding `unit` is one of those from the last to start before its bucket
-        // to the last to start before the next bucket.
-        let (lo, hi) = match (first.get(b), first.get(b + 1)) {
-            (Some(&lo), Some(&hi)) => (lo as usize, hi as usize),
-            (Some(&lo), None) => (lo as usize, unit0.len().saturating_sub(1)),
-            _ => return 0,
-        };
-        let Some(starts) = unit0.get(lo..=hi.max(lo)) else { return 0 };
-        (lo + starts.partition_point(|&u| u <= unit).saturating_sub(1)) as u32
+        // to the last to start before the next bucket: mostly the first of them.
+        let Some(&lo) = first.get(b) else { return 0 };
+        let lo = lo as usize;
+        match tiles.get(lo + 1) {
+            Some(next) if next.unit0 <= unit => {}
+            _ => return lo as u32,
+        }
+        let hi = first.get(b + 1).map_or(tiles.len(), |&h| h as usize + 1);
+        let Some(starts) = tiles.get(lo..hi.max(lo + 1)) else { return 0 };
+        (lo + starts.partition_point(|t| t.unit0 <= unit).saturating_sub(1)) as u32
+    }
+
+    /// [`Scene::slot_of_unit`].
+    #[inline]
+    fn slot_of(&self, unit: u64) -> (u32, u32) {
+        match self.tiles.get(self.tile_of(unit) as usize) {
+            Some(t) => (t.part, t.first_slot.wrapping_add(4 * (unit.wrapping_sub(t.unit0) / 9) as u32)),
+            None => (0, 0),
+        }
     }
 }
 
@@ -451,7 +475,20 @@ impl Scene {
     /// `unit`'s bucket of the file.
     #[inline]
     pub fn tile_of_unit(&self, unit: u64) -> u32 {
-        self.tile_index.get_or_init(|| TileIndex::new(self.tiles(), self.map.len() as u64)).tile_of(unit)
+        self.tile_index().tile_of(unit)
+    }
+
+    /// The part of the tile that holds the block at `unit` ([`Scene::tile_of_unit`]), and
+    /// the slot of the block's lane 0 in that part (lane `l` of a tile's block `b` is slot
+    /// `first_slot + 4 b + l`): what a hit is credited to. Some part and slot (no panic) for
+    /// a unit that is no block.
+    #[inline]
+    pub fn slot_of_unit(&self, unit: u64) -> (u32, u32) {
+        self.tile_index().slot_of(unit)
+    }
+
+    fn tile_index(&self) -> &TileIndex {
+        self.tile_index.get_or_init(|| TileIndex::new(self.tiles(), self.map.len() as u64))
     }
 
     /// The tile holding triangle slot `slot` of part `part` (its attributes are counted with
@@ -698,8 +735,8 @@ mod tests {
                     bytes,
                     node_count: nodes,
                     blocks,
-                    part: 0,
-                    first_slot: 0,
+                    part: rand(5) as u32,
+                    first_slot: rand(1 << 20) as u32,
                     reserved: 0,
                     checksum: 0,
                 });
@@ -713,11 +750,17 @@ mod tests {
                     let want = tiles.partition_point(|x| x.unit0() <= unit) - 1;
                     assert_eq!(want, t);
                     assert_eq!(index.tile_of(unit), t as u32, "{count} tiles: block {b} of tile {t}");
+                    assert_eq!(
+                        index.slot_of(unit),
+                        (e.part, e.first_slot + 4 * b),
+                        "{count} tiles: block {b} of tile {t}"
+                    );
                 }
             }
             // Outside every tile's blocks (the header page, past the end): some tile, no panic.
             for unit in [0, 1, offset / 16, u64::MAX] {
                 assert!((index.tile_of(unit) as usize) < count);
+                index.slot_of(unit);
             }
         }
     }

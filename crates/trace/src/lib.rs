@@ -1156,9 +1156,11 @@ impl<'s> Tracer<'s> {
     /// tile's block `b` is slot `first_slot + 4 b + l`).
     #[inline]
     fn slots(&self, arr: u32, unit: u64) -> (u32, u32) {
-        // A hit of a walk that kept no tile ([`Tracer::walk`]): the tile whose blocks hold it
-        // (tiles lie in file order).
-        let arr = if arr == TOP { self.scene.tile_of_unit(unit) } else { arr };
+        if arr == TOP {
+            // A hit of a walk that kept no tile ([`Tracer::walk`]): the tile whose blocks
+            // hold it (tiles lie in file order).
+            return self.scene.slot_of_unit(unit);
+        }
         let e = &self.tiles[arr as usize];
         (e.part, e.first_slot + 4 * ((unit - e.unit0()) / 9) as u32)
     }
