@@ -471,8 +471,8 @@ impl Scene {
     /// The tile whose triangle blocks hold the block at `unit` (its byte offset / 16), for
     /// a hit's block: the tile that holds `unit` if any does, some tile otherwise. A lookup
     /// in an index made at the first call (from the tile directory, which [`Scene::open`]
-    /// checked to be in file order), and a binary search of the few tiles that start in
-    /// `unit`'s bucket of the file.
+    /// checked to be in file order): the first tile of `unit`'s bucket of the file, or, when
+    /// more tiles start in the bucket, a binary search of them.
     #[inline]
     pub fn tile_of_unit(&self, unit: u64) -> u32 {
         self.tile_index().tile_of(unit)

@@ -1542,12 +1542,29 @@ impl<'s> Tracer<'s> {
     /// same hits (tested).
     #[inline(always)]
     fn walk_on<const AVX: bool, const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
+        let fresh = std::mem::replace(&mut w.fresh, false);
+        if fresh {
+            // Most rays of a wide view miss the whole scene: they end here, before any
+            // kernel's set-up. But where rays come that enter the scene's box (a view filled
+            // by the model, secondary rays), the test is 10-35 instructions that never cull,
+            // and the root node's test would cull as well: after a ray that entered the box,
+            // the thread's next [`SKIP_BOUNDS`] new rays go without it (callgrind, AVX2 path,
+            // stanford-bunny primary_1: at the close camera 752 -> 718 instructions per ray,
+            // at the default one, most of whose rays miss the box, 261 -> 239).
+            if w.streak.skip_bounds > 0 {
+                w.streak.skip_bounds -= 1;
+            } else if self.misses_bounds(ray) {
+                return Event::Empty;
+            } else {
+                w.streak.skip_bounds = SKIP_BOUNDS;
+            }
+        }
         // The kernel's number: an octant's (0..8) or [`GENERIC`]. (The baseline's
         // table holds the same kernel under every number.)
         let mut kernel = 0;
         if AVX {
             let oct = RayBox::octant(ray);
-            kernel = match (self.octant_kernels, w.fresh) {
+            kernel = match (self.octant_kernels, fresh) {
                 (Some(true), _) => oct,
                 (Some(false), _) => GENERIC,
                 (None, true) => {
@@ -1566,6 +1583,15 @@ impl<'s> Tracer<'s> {
         // instructions (`Tracer::kernel_table`), and `kernel` is below `KERNELS` (an octant
         // below 8, or [`GENERIC`]).
         unsafe { self.kernels[ANY as usize].get_unchecked(kernel)(self, w, ray) }
+    }
+
+    /// Whether `ray` misses the scene's box (its origin outside it, and its segment not
+    /// entering it): with the slab products and widening of the kernels' box tests, so never
+    /// stricter than them.
+    #[inline(always)]
+    fn misses_bounds(&self, ray: &Ray) -> bool {
+        let rb = RayBox::new(ray);
+        !rb.starts_inside(&self.bounds) && !rb.enters(&self.bounds, t_start(ray.t_min), ray.t_max)
     }
 
     /// The kernels for `isa`, with tile bookkeeping unless `all` tiles are checked
@@ -1670,22 +1696,6 @@ impl<'s> Tracer<'s> {
         }
         // Never below +0 ([`Ray::t_min`]): the box tests need it ([`RayBox::test`]).
         let t_min = t_start(ray.t_min);
-        if w.fresh {
-            w.fresh = false;
-            // Most rays of a wide view miss the whole scene: no more set-up for them. But
-            // where rays come that enter the scene's box (a view filled by the model,
-            // secondary rays), the test is 10-35 instructions that never cull, and the root
-            // node's test would cull as well: after a ray that entered the box, the thread's
-            // next [`SKIP_BOUNDS`] new rays go without it (callgrind, AVX2 path,
-            // stanford-bunny@close primary_1: 752 -> 721 instructions per ray).
-            if w.streak.skip_bounds > 0 {
-                w.streak.skip_bounds -= 1;
-            } else if !rb.starts_inside(&self.bounds) && !rb.enters(&self.bounds, t_min, ray.t_max) {
-                return Event::Empty;
-            } else {
-                w.streak.skip_bounds = SKIP_BOUNDS;
-            }
-        }
         // The generic kernel (`walk_on`) reads the triangles' rows by the ray's axes: no
         // choice by them, per ray or per block.
         let rt = match OCT {
@@ -1945,7 +1955,8 @@ struct Walk<'a> {
     /// The distance of the closest hit so far (the ray's end when none).
     t_best: f32,
     best: Option<Found>,
-    /// Not run yet: the first run tests the scene's box before anything else.
+    /// Not run yet: the first run tests the scene's box before anything else
+    /// ([`Tracer::walk_on`]).
     fresh: bool,
 }
 
@@ -1980,8 +1991,7 @@ const UNPAGED: &str = "an unpaged tracer never suspends";
 struct Scratch {
     /// The traversal stack.
     stack: [Entry; STACK],
-    /// The octant of the thread's last new ray, and how many before it had the same
-    /// ([`Tracer::walk_on`]).
+    /// What the thread's recent new rays were like ([`Tracer::walk_on`], [`Tracer::walk`]).
     streak: Streak,
 }
 
