@@ -8,6 +8,7 @@
 #
 #   bench/run_paired.sh                     2 rounds, all scenes (about 15 minutes)
 #   ROUNDS=3 ONLY="bunny bunny_close" bench/run_paired.sh
+#   python3 bench/median_rounds.py OUT_DIR   the median of per-round ratios per row
 #
 # Needs the peer built: make -C ../shared/peers/embree (Embree 3 and TBB from apt:
 # libembree-dev libtbb-dev), or PEER=/path/to/embree_bench. Output: $OUT_DIR/peer.jsonl and
