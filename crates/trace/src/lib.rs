@@ -1678,7 +1678,7 @@ impl<'s> Tracer<'s> {
     /// tile checked, [`Tracer::all_checked`]) there is nothing to check at all: a link is
     /// followed as an inner node is, and no tile is kept: `c` stays [`TOP`], and a hit is
     /// credited to its tile when made a [`Hit`] (if ever: `occluded` needs none), from its
-    /// block's position ([`Scene::tile_of_unit`]: one lookup per hit, where keeping the
+    /// block's position ([`Scene::slot_of_unit`]: one lookup per hit, where keeping the
     /// tile cost six instructions per node, the tile of every link chosen without a branch
     /// and that of every popped entry moved in).
     #[inline(always)]
@@ -1971,7 +1971,7 @@ impl<'a> Walk<'a> {
 }
 
 /// How many new rays go without the test of the scene's box after one that entered it
-/// ([`Tracer::walk`]): a view's rays come in tiles of neighbouring pixels, and a ray that
+/// ([`Tracer::walk_on`]): a view's rays come in tiles of neighbouring pixels, and a ray that
 /// misses the box all the same costs its set-up (about a hundred instructions) and one node.
 const SKIP_BOUNDS: u8 = 15;
 
@@ -1991,7 +1991,7 @@ const UNPAGED: &str = "an unpaged tracer never suspends";
 struct Scratch {
     /// The traversal stack.
     stack: [Entry; STACK],
-    /// What the thread's recent new rays were like ([`Tracer::walk_on`], [`Tracer::walk`]).
+    /// What the thread's recent new rays were like ([`Tracer::walk_on`]).
     streak: Streak,
 }
 
@@ -2002,7 +2002,7 @@ struct Streak {
     octant: u8,
     /// How many new rays before it had the same octant.
     run: u8,
-    /// How many more new rays go without the test of the scene's box ([`Tracer::walk`]).
+    /// How many more new rays go without the test of the scene's box ([`Tracer::walk_on`]).
     skip_bounds: u8,
 }
 

@@ -258,7 +258,8 @@ struct PacketTri {
     t_min: [f32; WIDTH],
 }
 
-/// A triangle as a packet's hits record it: its tile and [`Found16::at`].
+/// A triangle as a packet's hits record it: its tile and its block and lane as [`Found16`]
+/// holds them (`at_lo`, `at_hi`).
 #[derive(Clone, Copy)]
 struct Taken {
     arr: u32,
@@ -634,7 +635,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
     }
 }
 
-/// What [`Found16::at`] holds for a ray that has hit nothing.
+/// What [`Found16`]'s `at_lo` and `at_hi` hold, joined, for a ray that has hit nothing.
 const NONE: u64 = u64::MAX;
 
 /// The closest hit so far of each ray of a packet (its distance is the ray's `t_max`).
