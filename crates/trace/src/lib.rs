@@ -1706,7 +1706,8 @@ impl<'s> Tracer<'s> {
             _ => RayTri4::with_inv(ray, &rb.inv),
         };
         let shared = rb.splats::<AVX>(t_min);
-        let mut c = w.c;
+        // With `ALL` no tile is kept: [`TOP`] throughout, a constant (no register for it).
+        let mut c = if ALL { TOP } else { w.c };
         let mut sp = w.sp;
         let mut t_best = w.t_best;
         // The closest hit widened as box exits are ([`FAR_EPS`]), for the box tests and for
@@ -1802,11 +1803,6 @@ impl<'s> Tracer<'s> {
                     }
                     node
                 };
-                if sp > STACK - W {
-                    // No room for seven more entries.
-                    next = Some(Entry { r, arr: c, t: f32::NEG_INFINITY });
-                    break 'walk Event::Full;
-                }
                 // Read without a bounds check: node positions were checked with the tile.
                 let node = self.walk_node_at(node);
                 // The node's last line (its child references, which the box test does not
@@ -1823,6 +1819,20 @@ impl<'s> Tracer<'s> {
                 if mask == 0 {
                     continue 'walk;
                 }
+                let k0 = mask.trailing_zeros();
+                let m1 = mask & (mask - 1);
+                if m1 == 0 {
+                    r = node.child[k0 as usize];
+                    continue;
+                }
+                // Two or more children: pushes ahead. (Asked here, not at every node:
+                // most visits go on into one child and push nothing.)
+                if sp > STACK - W {
+                    // No room for seven more entries: the node is visited again after
+                    // the driver has made room.
+                    next = Some(Entry { r, arr: c, t: f32::NEG_INFINITY });
+                    break 'walk Event::Full;
+                }
                 // (An any-hit query reads no entry distance: none is kept.)
                 let at =
                     |k: u32| Entry { r: node.child[k as usize], arr, t: if ANY { 0.0 } else { dist.0[k as usize] } };
@@ -1831,12 +1841,6 @@ impl<'s> Tracer<'s> {
                     w.fixed[sp % STACK] = x;
                     sp += 1;
                 };
-                let k0 = mask.trailing_zeros();
-                let m1 = mask & (mask - 1);
-                if m1 == 0 {
-                    r = node.child[k0 as usize];
-                    continue;
-                }
                 if ANY {
                     // Any hit ends the ray, so order matters less than the cost of sorting:
                     // the first child next, the others pushed as they come.
