@@ -8,7 +8,8 @@
 #
 # A and B default to target/release/megaray; SA and SB, when set, replace SCENE for that side.
 # Each side runs `megaray bench SCENE --threads 1 --reps 3 --json ARGS`. Prints, per ray kind,
-# the median Mrays/s (Mtris/s for build kinds) of each side and the median of the per-round ratios B/A (with every round's).
+# the median Mrays/s (Mtris/s for build kinds) of each side and the median and geometric mean of the
+# per-round ratios B/A (with every round's; use an even number of rounds: see the geometric mean's note).
 # With PER_CPU=1 each figure is divided by the run's cpu_util (CPU seconds per wall second):
 # per CPU second rather than per wall second, which takes out the time a busy host stole
 # from the VM (its steal time is not the process's CPU time).
@@ -50,5 +51,9 @@ for kind in sorted({k for k, _ in figs}):
         print(f"{kind}: a side failed ({len(a)} against {len(b)} rounds)")
         continue
     ratios = [y / x for x, y in zip(a, b)]
-    print(f"{kind:12} A {st.median(a):8.3f}  B {st.median(b):8.3f}  B/A {st.median(ratios):.3f}  rounds {[round(r, 3) for r in ratios]}")
+    # The geometric mean too: where one core is slower than the other for a while, the
+    # rounds alternate high and low (the sides swap cores every round), and over an even
+    # number of rounds the geometric mean cancels that where the median need not.
+    gm = st.geometric_mean(ratios)
+    print(f"{kind:12} A {st.median(a):8.3f}  B {st.median(b):8.3f}  B/A {st.median(ratios):.3f}  geomean {gm:.3f}  rounds {[round(r, 3) for r in ratios]}")
 PY
