@@ -918,12 +918,21 @@ pub struct Tracer<'s> {
     /// ([`Tracer::walk_on`]): chosen once, so that a ray's walk starts with one indirect
     /// call, not a test of each setting and a jump through a table.
     kernels: [[Kernel; KERNELS]; 2],
+    /// The same kernels for a new ray on a tracer whose every tile is checked, each in one
+    /// function with its walk's state in registers ([`Tracer::new_ray`]): what
+    /// [`Tracer::intersect`] and [`Tracer::occluded`] run. `None` on the baseline instruction
+    /// set and where tiles are checked as the walk goes.
+    new_ray: Option<[[NewRay; KERNELS]; 2]>,
 }
 
 /// A single-ray kernel: [`Tracer::walk`] compiled for one instruction set, query kind, tile
 /// bookkeeping and kernel number. Unsafe: the AVX ones must only run where the CPU has the
 /// instructions, which [`Tracer::kernel_table`] sees to.
 type Kernel = for<'a, 'b, 'c, 'd> unsafe fn(&'a Tracer<'b>, &'c mut Walk<'d>, &Ray) -> Event;
+
+/// A kernel for a new ray ([`Tracer::new_ray`]): what [`Kernel`] is for a walk, from the
+/// thread's scratch memory to the closest (or any) hit. Unsafe as [`Kernel`] is.
+type NewRay = for<'a, 'b, 'c> unsafe fn(&'a Tracer<'b>, &'c mut Scratch, &Ray) -> Option<Found>;
 
 /// The generic kernel's number ([`Tracer::walk_on`]; octants' are `0..8`).
 const GENERIC: usize = 8;
@@ -977,6 +986,7 @@ impl<'s> Tracer<'s> {
             all_checked,
             octant_kernels: None,
             kernels: Tracer::kernel_table(isa, all_checked),
+            new_ray: Tracer::new_ray_table(isa, all_checked),
             root: match scene.parts() {
                 // The part's root, as the top-level tree links to it (in range: checked by
                 // `Scene::open`).
@@ -995,6 +1005,7 @@ impl<'s> Tracer<'s> {
         assert!(packet::Isa::available().contains(&isa), "{isa:?} is not available on this machine");
         self.isa = isa;
         self.kernels = Tracer::kernel_table(isa, self.all_checked);
+        self.new_ray = Tracer::new_ray_table(isa, self.all_checked);
         self
     }
 
@@ -1013,6 +1024,7 @@ impl<'s> Tracer<'s> {
     pub fn with_tile_checks(mut self) -> Tracer<'s> {
         self.all_checked = false;
         self.kernels = Tracer::kernel_table(self.isa, false);
+        self.new_ray = None;
         self
     }
 
@@ -1370,8 +1382,16 @@ impl<'s> Tracer<'s> {
         })
     }
 
+    /// [`Tracer::unpaged`] with the thread's scratch memory: by a new-ray kernel where
+    /// every tile is checked ([`Tracer::new_ray`]), else by the driver.
     #[inline(never)]
     fn unpaged_in<const ANY: bool>(&self, ray: &Ray, scratch: &mut Scratch) -> Option<Found> {
+        if let Some(table) = &self.new_ray {
+            let kernel = self.first_kernel::<true>(&mut scratch.streak, ray)?;
+            // SAFETY: the table holds kernels only for an instruction set the CPU has
+            // (`Tracer::new_ray_table`), and `kernel` is below `KERNELS`.
+            return unsafe { table[ANY as usize].get_unchecked(kernel)(self, scratch, ray) };
+        }
         let mut w = Walk::new(scratch, self.root, ray.t_max);
         #[cfg(target_arch = "x86_64")]
         if self.isa != packet::Isa::Baseline {
@@ -1542,47 +1562,121 @@ impl<'s> Tracer<'s> {
     /// same hits (tested).
     #[inline(always)]
     fn walk_on<const AVX: bool, const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
-        let fresh = std::mem::replace(&mut w.fresh, false);
-        if fresh {
-            // Most rays of a wide view miss the whole scene: they end here, before any
-            // kernel's set-up. But where rays come that enter the scene's box (a view filled
-            // by the model, secondary rays), the test is 10-35 instructions that never cull,
-            // and the root node's test would cull as well: after a ray that entered the box,
-            // the thread's next [`SKIP_BOUNDS`] new rays go without it (callgrind, AVX2 path,
-            // stanford-bunny primary_1: at the close camera 752 -> 718 instructions per ray,
-            // at the default one, most of whose rays miss the box, 261 -> 239).
-            if w.streak.skip_bounds > 0 {
-                w.streak.skip_bounds -= 1;
-            } else if self.misses_bounds(ray) {
-                return Event::Empty;
-            } else {
-                w.streak.skip_bounds = SKIP_BOUNDS;
+        let kernel = if std::mem::replace(&mut w.fresh, false) {
+            match self.first_kernel::<AVX>(w.streak, ray) {
+                Some(kernel) => kernel,
+                None => return Event::Empty,
             }
-        }
-        // The kernel's number: an octant's (0..8) or [`GENERIC`]. (The baseline's
-        // table holds the same kernel under every number.)
-        let mut kernel = 0;
-        if AVX {
-            let oct = RayBox::octant(ray);
-            kernel = match (self.octant_kernels, fresh) {
-                (Some(true), _) => oct,
-                (Some(false), _) => GENERIC,
-                (None, true) => {
-                    // Without branches: diffuse rays' octants come at random, and a branch on
-                    // `last == oct` mispredicted for 0.31 of them (callgrind).
-                    let (last, n) = (w.streak.octant, w.streak.run);
-                    let n = std::hint::select_unpredictable(last as usize == oct, n.saturating_add(1), 0);
-                    (w.streak.octant, w.streak.run) = (oct as u8, n);
-                    std::hint::select_unpredictable(n >= STREAK_MIN, oct, GENERIC)
-                }
-                // A walk resumed after an event keeps to the generic kernel.
-                (None, false) => GENERIC,
-            };
-        }
+        } else if AVX && self.octant_kernels == Some(true) {
+            RayBox::octant(ray)
+        } else {
+            // A walk resumed after an event keeps to the generic kernel. (The baseline's
+            // table holds the same kernel under every number.)
+            GENERIC
+        };
         // SAFETY: the table holds AVX kernels only where `isa` says the CPU has their
         // instructions (`Tracer::kernel_table`), and `kernel` is below `KERNELS` (an octant
         // below 8, or [`GENERIC`]).
         unsafe { self.kernels[ANY as usize].get_unchecked(kernel)(self, w, ray) }
+    }
+
+    /// The kernel's number for a new ray (an octant's, `0..8`, or [`GENERIC`]; any on the
+    /// baseline, whose table holds one kernel under every number), or `None` when the ray
+    /// misses the scene's box, as [`Tracer::walk_on`] says. Updates the thread's `streak`.
+    #[inline(always)]
+    fn first_kernel<const AVX: bool>(&self, streak: &mut Streak, ray: &Ray) -> Option<usize> {
+        // Most rays of a wide view miss the whole scene: they end here, before any
+        // kernel's set-up. But where rays come that enter the scene's box (a view filled
+        // by the model, secondary rays), the test is 10-35 instructions that never cull,
+        // and the root node's test would cull as well: after a ray that entered the box,
+        // the thread's next [`SKIP_BOUNDS`] new rays go without it (callgrind, AVX2 path,
+        // stanford-bunny primary_1: at the close camera 752 -> 718 instructions per ray,
+        // at the default one, most of whose rays miss the box, 261 -> 239).
+        if streak.skip_bounds > 0 {
+            streak.skip_bounds -= 1;
+        } else if self.misses_bounds(ray) {
+            return None;
+        } else {
+            streak.skip_bounds = SKIP_BOUNDS;
+        }
+        if !AVX {
+            return Some(GENERIC);
+        }
+        let oct = RayBox::octant(ray);
+        Some(match self.octant_kernels {
+            Some(true) => oct,
+            Some(false) => GENERIC,
+            None => {
+                // Without branches: diffuse rays' octants come at random, and a branch on
+                // `last == oct` mispredicted for 0.31 of them (callgrind).
+                let (last, n) = (streak.octant, streak.run);
+                let n = std::hint::select_unpredictable(last as usize == oct, n.saturating_add(1), 0);
+                (streak.octant, streak.run) = (oct as u8, n);
+                std::hint::select_unpredictable(n >= STREAK_MIN, oct, GENERIC)
+            }
+        })
+    }
+
+    /// A new ray's whole walk on a tracer with every tile checked ([`Tracer::new_ray`]'s
+    /// table): [`Tracer::walk`] inlined with its [`Walk`] a local of this function, so that
+    /// the walk's state (stack depth, closest hit, the entry to start from) is made, kept and
+    /// read in registers, not written to memory for the kernel and read back by a driver
+    /// (callgrind, AVX2 path: 35-40 instructions per ray of the 70 the driver and the
+    /// kernel's entry and exit took). The rare events go on in [`Tracer::drive_rare`] with
+    /// the walk kernels.
+    #[inline(always)]
+    fn new_ray<const AVX: bool, const ANY: bool, const OCT: usize>(
+        &self,
+        scratch: &mut Scratch,
+        ray: &Ray,
+    ) -> Option<Found> {
+        let mut w = Walk::new(scratch, self.root, ray.t_max);
+        // (Its scene-box test was [`Tracer::first_kernel`]'s.)
+        w.fresh = false;
+        match self.walk::<AVX, ANY, true, OCT>(&mut w, ray) {
+            Event::Empty | Event::Hit => w.best,
+            // The walk moved, not borrowed, so that nothing takes its address on the
+            // common path.
+            ev => self.new_ray_rare::<AVX, ANY>(ray, w, ev),
+        }
+    }
+
+    /// [`Tracer::new_ray`] after an event: the driver's loop, with the walk kernels.
+    #[cold]
+    #[inline(never)]
+    fn new_ray_rare<const AVX: bool, const ANY: bool>(&self, ray: &Ray, mut w: Walk<'_>, ev: Event) -> Option<Found> {
+        self.drive_rare::<AVX, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR).expect(UNPAGED)
+    }
+
+    /// The new-ray kernels for `isa` where every tile is checked (`all`), else `None`
+    /// ([`Tracer::new_ray`]).
+    fn new_ray_table(isa: packet::Isa, all: bool) -> Option<[[NewRay; KERNELS]; 2]> {
+        if !all {
+            return None;
+        }
+        macro_rules! row {
+            ($f:ident, $any:literal) => {
+                [
+                    $f::<$any, 0> as NewRay,
+                    $f::<$any, 1> as NewRay,
+                    $f::<$any, 2> as NewRay,
+                    $f::<$any, 3> as NewRay,
+                    $f::<$any, 4> as NewRay,
+                    $f::<$any, 5> as NewRay,
+                    $f::<$any, 6> as NewRay,
+                    $f::<$any, 7> as NewRay,
+                    $f::<$any, GENERIC> as NewRay,
+                ]
+            };
+        }
+        #[cfg(target_arch = "x86_64")]
+        match isa {
+            packet::Isa::Avx512 => return Some([row!(new_ray_avx512, false), row!(new_ray_avx512, true)]),
+            packet::Isa::Avx2 => return Some([row!(new_ray_avx2, false), row!(new_ray_avx2, true)]),
+            _ => {}
+        }
+        let _ = isa;
+        None
     }
 
     /// Whether `ray` misses the scene's box (its origin outside it, and its segment not
@@ -1916,6 +2010,22 @@ fn walk_avx512<const ANY: bool, const ALL: bool, const OCT: usize>(
     ray: &Ray,
 ) -> Event {
     t.walk::<true, ANY, ALL, OCT>(w, ray)
+}
+
+/// [`Tracer::new_ray`] compiled for AVX2, as [`walk_avx2`] is.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline(never)]
+fn new_ray_avx2<const ANY: bool, const OCT: usize>(t: &Tracer<'_>, s: &mut Scratch, ray: &Ray) -> Option<Found> {
+    t.new_ray::<true, ANY, OCT>(s, ray)
+}
+
+/// [`Tracer::new_ray`] compiled for AVX-512, as [`walk_avx512`] is.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
+#[inline(never)]
+fn new_ray_avx512<const ANY: bool, const OCT: usize>(t: &Tracer<'_>, s: &mut Scratch, ray: &Ray) -> Option<Found> {
+    t.new_ray::<true, ANY, OCT>(s, ray)
 }
 
 /// [`Tracer::walk`] on the baseline instruction set (SSE2 on x86-64).
