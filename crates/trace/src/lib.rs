@@ -1808,6 +1808,10 @@ impl<'s> Tracer<'s> {
         // skipping popped entries beyond it.
         let mut t_wide = t_best * FAR_EPS;
         let mut next = w.next.take();
+        // One place pops, and it asks first whether an interrupted entry is pending. Both
+        // ways of not asking (a pop at each dead end; the pending entry pushed before the
+        // loop) made any-hit rays ~10% slower on AVX-512 (bench/ab.sh, sphereflake:2): the
+        // compiler then copies the pop into every dead end, and those branches predict worse.
         let event = 'walk: loop {
             let e = match next.take() {
                 Some(e) => e,
