@@ -937,6 +937,25 @@ type NewRay = for<'a, 'b, 'c> unsafe fn(&'a Tracer<'b>, &'c mut Scratch, &Ray) -
 /// The generic kernel's number ([`Tracer::walk_on`]; octants' are `0..8`).
 const GENERIC: usize = 8;
 
+/// A row of a kernel table: `$f` with the given leading const arguments, then each kernel
+/// number (the eight octants, then [`GENERIC`]), as function pointers of type `$ty`.
+#[cfg_attr(not(target_arch = "x86_64"), allow(unused_macros))]
+macro_rules! kernel_row {
+    ($f:ident, $ty:ty, $($arg:literal),+) => {
+        [
+            $f::<$($arg,)+ 0> as $ty,
+            $f::<$($arg,)+ 1> as $ty,
+            $f::<$($arg,)+ 2> as $ty,
+            $f::<$($arg,)+ 3> as $ty,
+            $f::<$($arg,)+ 4> as $ty,
+            $f::<$($arg,)+ 5> as $ty,
+            $f::<$($arg,)+ 6> as $ty,
+            $f::<$($arg,)+ 7> as $ty,
+            $f::<$($arg,)+ GENERIC> as $ty,
+        ]
+    };
+}
+
 /// Kernels per query kind: eight octant ones and the generic one ([`Tracer::walk_on`]).
 const KERNELS: usize = GENERIC + 1;
 
@@ -1654,25 +1673,14 @@ impl<'s> Tracer<'s> {
         if !all {
             return None;
         }
-        macro_rules! row {
-            ($f:ident, $any:literal) => {
-                [
-                    $f::<$any, 0> as NewRay,
-                    $f::<$any, 1> as NewRay,
-                    $f::<$any, 2> as NewRay,
-                    $f::<$any, 3> as NewRay,
-                    $f::<$any, 4> as NewRay,
-                    $f::<$any, 5> as NewRay,
-                    $f::<$any, 6> as NewRay,
-                    $f::<$any, 7> as NewRay,
-                    $f::<$any, GENERIC> as NewRay,
-                ]
-            };
-        }
         #[cfg(target_arch = "x86_64")]
         match isa {
-            packet::Isa::Avx512 => return Some([row!(new_ray_avx512, false), row!(new_ray_avx512, true)]),
-            packet::Isa::Avx2 => return Some([row!(new_ray_avx2, false), row!(new_ray_avx2, true)]),
+            packet::Isa::Avx512 => {
+                return Some([kernel_row!(new_ray_avx512, NewRay, false), kernel_row!(new_ray_avx512, NewRay, true)])
+            }
+            packet::Isa::Avx2 => {
+                return Some([kernel_row!(new_ray_avx2, NewRay, false), kernel_row!(new_ray_avx2, NewRay, true)])
+            }
             _ => {}
         }
         let _ = isa;
@@ -1691,27 +1699,20 @@ impl<'s> Tracer<'s> {
     /// The kernels for `isa`, with tile bookkeeping unless `all` tiles are checked
     /// ([`Tracer::kernels`]).
     fn kernel_table(isa: packet::Isa, all: bool) -> [[Kernel; KERNELS]; 2] {
-        macro_rules! row {
-            ($walk:ident, $any:literal, $all:literal) => {
-                [
-                    $walk::<$any, $all, 0> as Kernel,
-                    $walk::<$any, $all, 1> as Kernel,
-                    $walk::<$any, $all, 2> as Kernel,
-                    $walk::<$any, $all, 3> as Kernel,
-                    $walk::<$any, $all, 4> as Kernel,
-                    $walk::<$any, $all, 5> as Kernel,
-                    $walk::<$any, $all, 6> as Kernel,
-                    $walk::<$any, $all, 7> as Kernel,
-                    $walk::<$any, $all, GENERIC> as Kernel,
-                ]
-            };
-        }
         #[cfg(target_arch = "x86_64")]
         match (isa, all) {
-            (packet::Isa::Avx512, true) => return [row!(walk_avx512, false, true), row!(walk_avx512, true, true)],
-            (packet::Isa::Avx512, false) => return [row!(walk_avx512, false, false), row!(walk_avx512, true, false)],
-            (packet::Isa::Avx2, true) => return [row!(walk_avx2, false, true), row!(walk_avx2, true, true)],
-            (packet::Isa::Avx2, false) => return [row!(walk_avx2, false, false), row!(walk_avx2, true, false)],
+            (packet::Isa::Avx512, true) => {
+                return [kernel_row!(walk_avx512, Kernel, false, true), kernel_row!(walk_avx512, Kernel, true, true)]
+            }
+            (packet::Isa::Avx512, false) => {
+                return [kernel_row!(walk_avx512, Kernel, false, false), kernel_row!(walk_avx512, Kernel, true, false)]
+            }
+            (packet::Isa::Avx2, true) => {
+                return [kernel_row!(walk_avx2, Kernel, false, true), kernel_row!(walk_avx2, Kernel, true, true)]
+            }
+            (packet::Isa::Avx2, false) => {
+                return [kernel_row!(walk_avx2, Kernel, false, false), kernel_row!(walk_avx2, Kernel, true, false)]
+            }
             _ => {}
         }
         let _ = isa;
