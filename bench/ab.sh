@@ -30,30 +30,4 @@ while [ "$i" -le "$rounds" ]; do
   wait
   i=$((i + 1))
 done
-python3 - "$tmp" "$rounds" "${PER_CPU:-0}" <<'PY'
-import json, statistics as st, sys
-tmp, rounds, per_cpu = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1"
-figs = {}
-for side in "AB":
-    for i in range(1, rounds + 1):
-        for line in open(f"{tmp}/{side}.{i}"):
-            if line.startswith("{"):
-                r = json.loads(line)
-                # Rays per second, or triangles per second for the build kinds.
-                fig = r.get("mrays_s", r.get("mtris_s"))
-                if fig is not None and per_cpu and r.get("cpu_util", 0) > 0:
-                    fig /= r["cpu_util"]
-                if fig is not None:
-                    figs.setdefault((r["kind"], side), []).append(fig)
-for kind in sorted({k for k, _ in figs}):
-    a, b = figs.get((kind, "A"), []), figs.get((kind, "B"), [])
-    if not a or len(a) != len(b):
-        print(f"{kind}: a side failed ({len(a)} against {len(b)} rounds)")
-        continue
-    ratios = [y / x for x, y in zip(a, b)]
-    # The geometric mean too: where one core is slower than the other for a while, the
-    # rounds alternate high and low (the sides swap cores every round), and over an even
-    # number of rounds the geometric mean cancels that where the median need not.
-    gm = st.geometric_mean(ratios)
-    print(f"{kind:12} A {st.median(a):8.3f}  B {st.median(b):8.3f}  B/A {st.median(ratios):.3f}  geomean {gm:.3f}  rounds {[round(r, 3) for r in ratios]}")
-PY
+python3 "$root/bench/round_ratios.py" "$tmp" "$rounds" A B "${PER_CPU:-0}"

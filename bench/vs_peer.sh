@@ -3,7 +3,8 @@
 # megaray's bench in turn (the order swapped every round), on one thread, a few ray kinds, ROUNDS
 # times. The two sides of a row are measured seconds apart (run_paired.sh runs every kind of a
 # scene on one side, then on the other: minutes apart on a VM that drifts 10-30% in minutes).
-# Prints, per kind, each side's median and the median of the per-round ratios megaray/peer.
+# Prints, per kind, each side's median and the median and geometric mean of the per-round
+# ratios megaray/peer (bench/round_ratios.py).
 # (Not at the same time, one per core, as bench/ab.sh runs two megaray builds: the two
 # harnesses then share the L3 and memory unevenly, and the ratios come out different from the
 # suite's.)
@@ -16,7 +17,7 @@
 # PEER (default ../shared/peers/embree/embree_bench) and MEGARAY (default target/dist/megaray,
 # built by `cargo build --profile dist -p megaray`) name the two binaries.
 set -e
-[ $# -eq 4 ] || { sed -n '2,16p' "$0"; exit 2; }
+[ $# -eq 4 ] || { sed -n '2,18p' "$0"; exit 2; }
 rounds=$1; peer_args=$2; ours_args=$3; kinds=$4
 root=$(cd "$(dirname "$0")/.." && pwd)
 PEER=${PEER:-$root/../shared/peers/embree/embree_bench}
@@ -27,33 +28,15 @@ tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 peer() { # $peer_args is word-split on purpose: it holds several arguments
   # shellcheck disable=SC2086
-  "$PEER" $peer_args --threads 1 --reps 3 --kinds "$kinds" > "$tmp/P.$i" 2>/dev/null
+  "$PEER" $peer_args --threads 1 --reps 3 --kinds "$kinds" > "$tmp/peer.$i" 2>/dev/null
 }
 ours() {
   # shellcheck disable=SC2086
-  "$MEGARAY" bench $ours_args --threads 1 --reps 3 --json --kinds "$kinds" > "$tmp/M.$i" 2>/dev/null
+  "$MEGARAY" bench $ours_args --threads 1 --reps 3 --json --kinds "$kinds" > "$tmp/megaray.$i" 2>/dev/null
 }
 i=1
 while [ "$i" -le "$rounds" ]; do
   if [ $((i % 2)) = 1 ]; then peer; ours; else ours; peer; fi
   i=$((i + 1))
 done
-python3 - "$tmp" "$rounds" <<'PY'
-import json, statistics as st, sys
-tmp, rounds = sys.argv[1], int(sys.argv[2])
-figs = {}
-for side in "PM":
-    for i in range(1, rounds + 1):
-        for line in open(f"{tmp}/{side}.{i}"):
-            if line.startswith("{"):
-                r = json.loads(line)
-                if "mrays_s" in r:
-                    figs.setdefault((r["kind"], side), []).append(r["mrays_s"])
-for kind in sorted({k for k, _ in figs}):
-    p, m = figs.get((kind, "P"), []), figs.get((kind, "M"), [])
-    if not p or len(p) != len(m):
-        print(f"{kind}: a side failed ({len(p)} against {len(m)} rounds)")
-        continue
-    ratios = [y / x for x, y in zip(p, m)]
-    print(f"{kind:12} peer {st.median(p):8.3f}  megaray {st.median(m):8.3f}  ratio {st.median(ratios):.3f}  rounds {[round(r, 3) for r in ratios]}")
-PY
+python3 "$root/bench/round_ratios.py" "$tmp" "$rounds" peer megaray
