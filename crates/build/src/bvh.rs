@@ -7,15 +7,16 @@ use megaray_base::Aabb;
 use megaray_scene::format::NODE_WIDTH;
 
 /// Cost of one node traversal relative to one test of a block of four primitives. Two, not
-/// one: a node visit is a cache miss more often than a block test is (256 bytes against
-/// 144, and a block is tested only after its node), so trees priced so trace at least as
-/// fast with fewer nodes and bytes. Measured against 1 (`megaray info --tree`; `bench/ab.sh`
-/// with the two scenes, one binary, Intel Xeon): grid:1000 67K 8-wide nodes instead of 95K,
-/// 46.0 bytes per triangle instead of 49.6; sphereflake:4 50.3 (52.8); stanford-bunny 47.7
-/// (50.7); 3-4% fewer node visits and 13-19% more blocks tested per shadow or diffuse ray
-/// (leaves fuller, two-block leaves tested in one pass), +0.5-2% shadow and diffuse rays per
-/// second on sphereflake:3 and stanford-bunny (30 rounds), +2-5% on grid:1000, primary rays
-/// within noise, build time unchanged. 3 gains nothing more (+-1.5%); 1.5 and 0.7 are noise.
+/// one, though a node step takes fewer instructions than a block test: a node is 256 bytes
+/// against a block's 144, every block test comes after a node visit, and trees priced so
+/// measured at least as fast, with fewer nodes and bytes. Against 1 (`megaray info --tree`;
+/// `bench/ab.sh` with the two scenes, one binary, Intel Xeon): grid:1000 67K 8-wide nodes
+/// instead of 95K, 46.0 bytes per triangle instead of 49.6; sphereflake:4 50.3 (52.8);
+/// stanford-bunny 47.7 (50.7); 3-4% fewer node visits and 13-19% more blocks tested per
+/// shadow or diffuse ray (leaves fuller, two-block leaves tested in one pass), +0.5-2% shadow
+/// and diffuse rays per second on sphereflake:3 and stanford-bunny (30 rounds), +2-5% on
+/// grid:1000, primary rays within noise, build time unchanged. 3 gains nothing more
+/// (+-1.5%); 1.5 and 0.7 are noise.
 const C_TRAV: f32 = 2.0;
 /// Primitives are tested four at a time (one SIMD block), so the SAH counts blocks.
 const BLOCK: u32 = 4;
