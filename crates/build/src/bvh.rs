@@ -1064,15 +1064,17 @@ mod tests {
         }
     }
 
-    /// The SAH cost of an 8-wide tree as the builder counts it: a traversal step per inner
-    /// node and a block test per four primitives of a leaf, each weighted by its box's area.
+    /// The SAH cost of an 8-wide tree as the builder counts it: a traversal step ([`C_TRAV`])
+    /// per inner node and a block test per four primitives of a leaf, each weighted by its
+    /// box's area.
     fn sah_cost(b: &Bvh) -> f64 {
-        let mut cost = b.bounds.half_area() as f64;
+        let step = C_TRAV as f64;
+        let mut cost = b.bounds.half_area() as f64 * step;
         for n in &b.nodes {
             for (k, kid) in n.kids.iter().enumerate() {
                 let area = n.bounds[k].half_area() as f64;
                 match kid {
-                    Kid::Inner(_) => cost += area,
+                    Kid::Inner(_) => cost += area * step,
                     Kid::Leaf { count, .. } => cost += area * count.div_ceil(BLOCK) as f64,
                     Kid::Empty => {}
                 }
