@@ -26,13 +26,20 @@ MEGARAY=${MEGARAY:-$root/target/dist/megaray}
 [ -x "$MEGARAY" ] || { echo "no megaray at $MEGARAY (cargo build --profile dist -p megaray, or set MEGARAY)" >&2; exit 2; }
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
+# A side that fails stops the script with its own last error line (its stderr is kept apart
+# from the figures on stdout).
+failed() { # side
+  echo "vs_peer.sh: the $1 side failed in round $i: $(tail -n 1 "$tmp/$1.err")" >&2
+  exit 1
+}
 peer() { # $peer_args is word-split on purpose: it holds several arguments
   # shellcheck disable=SC2086
-  "$PEER" $peer_args --threads 1 --reps 3 --kinds "$kinds" > "$tmp/peer.$i" 2>/dev/null
+  "$PEER" $peer_args --threads 1 --reps 3 --kinds "$kinds" > "$tmp/peer.$i" 2> "$tmp/peer.err" || failed peer
 }
 ours() {
   # shellcheck disable=SC2086
-  "$MEGARAY" bench $ours_args --threads 1 --reps 3 --json --kinds "$kinds" > "$tmp/megaray.$i" 2>/dev/null
+  "$MEGARAY" bench $ours_args --threads 1 --reps 3 --json --kinds "$kinds" > "$tmp/megaray.$i" 2> "$tmp/megaray.err" ||
+    failed megaray
 }
 i=1
 while [ "$i" -le "$rounds" ]; do
