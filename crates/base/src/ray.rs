@@ -1,8 +1,10 @@
 use glam::Vec3;
 
 /// A ray: origin, direction (not necessarily normalised) and the parametric interval
-/// `[t_min, t_max]` in which hits count.
+/// `[t_min, t_max]` in which hits count. 32 bytes, in this order (the assembly kernel of
+/// `megaray-trace` reads them so).
 #[derive(Clone, Copy, Debug)]
+#[repr(C)]
 pub struct Ray {
     pub org: Vec3,
     pub dir: Vec3,
@@ -15,6 +17,8 @@ pub struct Ray {
     pub t_min: f32,
     pub t_max: f32,
 }
+
+const _: () = assert!(std::mem::size_of::<Ray>() == 32);
 
 impl Ray {
     pub fn new(org: Vec3, dir: Vec3) -> Ray {

@@ -230,9 +230,11 @@ fn packet_kernels_equal_single_rays() {
 }
 
 /// The single-ray kernel on every instruction set this machine has (the box test in AVX2 or
-/// in baseline SSE; on AVX2 the kernels for one octant of directions and the generic one)
-/// gives the same closest hits, bit for bit, and the same any-hit answers: on random rays,
-/// camera rays, and rays aimed exactly at vertices and edge midpoints; and again with the
+/// in baseline SSE; on AVX2 the kernels for one octant of directions and the generic one,
+/// and the assembly kernel that runs in the generic one's place, alone and handing its walk
+/// to the driver at a stack cut short) gives the same closest hits, bit for bit, and the same
+/// any-hit answers: on random rays, camera rays, and rays aimed exactly at vertices and edge
+/// midpoints (whose edges on the ray the kernels leave to the driver); and again with the
 /// traversal stack overflowing into its spill; each with and without its tile bookkeeping
 /// (which a tracer skips when every tile is checked).
 #[test]
@@ -276,15 +278,29 @@ fn single_ray_kernels_agree_across_isas() {
     // Every tile checked: the kernels without tile bookkeeping, and those with it.
     assert!(scene.check_all_tiles());
     assert!(Tracer::new(&scene).skips_tile_checks());
+    // The assembly kernel (where this machine runs it) as it runs, with its stack cut to
+    // one and to three entries below a node's children, and not at all.
+    let asm_here = Isa::available().contains(&Isa::Avx2) && Tracer::new(&scene).with_isa(Isa::Avx2).runs_asm_kernel();
+    let asm_cases: &[Option<usize>] = if asm_here { &[None, Some(1), Some(3), Some(0)] } else { &[None] };
     let kernels = Isa::available().iter().flat_map(|&isa| [(isa, None), (isa, Some(true)), (isa, Some(false))]);
-    for ((isa, octants), checks) in kernels.flat_map(|k| [(k, false), (k, true)]) {
+    let kernels = kernels.flat_map(|(isa, oct)| asm_cases.iter().map(move |&a| (isa, oct, a)));
+    for ((isa, octants, asm), checks) in kernels.flat_map(|k| [(k, false), (k, true)]) {
+        if asm.is_some() && (isa != Isa::Avx2 || octants != Some(false) || checks) {
+            continue;
+        }
         let tracer = match octants {
             None => Tracer::new(&scene).with_isa(isa),
             Some(always) => Tracer::new(&scene).with_isa(isa).with_octant_kernels(always),
         };
+        let tracer = match asm {
+            None => tracer,
+            Some(0) => tracer.with_asm_kernel(false),
+            Some(n) => tracer.with_asm_stack(n),
+        };
         let tracer = if checks { tracer.with_tile_checks() } else { tracer };
         assert_eq!(tracer.skips_tile_checks(), !checks);
-        let isa = format!("{isa:?} (octant kernels {octants:?}, tile checks {checks})");
+        assert_eq!(tracer.runs_asm_kernel(), asm_here && isa == Isa::Avx2 && !checks && asm != Some(0));
+        let isa = format!("{isa:?} (octant kernels {octants:?}, tile checks {checks}, assembly kernel {asm:?})");
         let got: Vec<_> = rays.par_iter().map(|r| (key(tracer.intersect(r)), tracer.occluded(r))).collect();
         let bad = (0..rays.len()).filter(|&i| got[i] != want[i]).count();
         assert_eq!(bad, 0, "{isa}: {bad} of {} rays differ from the baseline kernel", rays.len());

@@ -19,6 +19,8 @@
 //! }
 //! ```
 
+#[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+mod asm;
 pub mod jobs;
 pub mod packet;
 pub mod stats;
@@ -142,6 +144,10 @@ enum Step<'a> {
     Missing(u32),
 }
 
+/// The smallest magnitude of a direction component the box test takes as it is: smaller
+/// ones (and zeros) become +-`TINY`, so that their reciprocals stay finite ([`RayBox::new`]).
+const TINY: f32 = 1e-20;
+
 /// Lanes of a node's box test.
 const W: usize = NODE_WIDTH;
 
@@ -183,7 +189,7 @@ impl RayBox {
         // 0 * inf makes a NaN in the slab distances. One vector division (`divps` rounds each
         // lane as `divss` would).
         let d = Vec3A::from(r.dir);
-        let fixed = d.abs().max(Vec3A::splat(1e-20)).copysign(d);
+        let fixed = d.abs().max(Vec3A::splat(TINY)).copysign(d);
         let inv = Vec3A::ONE / fixed;
         // (Negation is exact: `-(inv * FAR_EPS)` is `-inv * FAR_EPS`, bit for bit.)
         let ninv = -inv;
@@ -576,7 +582,7 @@ impl RayTri4 {
         };
         let dz = _mm_cvtss_f32(_mm_permute_ps::<0xaa>(dp));
         // As in `with_shear`: `inv[kz]` wherever `RayBox` left the component as it was.
-        let sz = if dz.abs() >= 1e-20 { _mm_permute_ps::<0xaa>(ip) } else { _mm_set1_ps(1.0 / dz) };
+        let sz = if dz.abs() >= TINY { _mm_permute_ps::<0xaa>(ip) } else { _mm_set1_ps(1.0 / dz) };
         let sxy = _mm_mul_ps(dp, sz);
         let splat = |v: __m128, lane: i32| {
             Vec4::from(match lane {
@@ -923,6 +929,12 @@ pub struct Tracer<'s> {
     /// [`Tracer::intersect`] and [`Tracer::occluded`] run. `None` on the baseline instruction
     /// set and where tiles are checked as the walk goes.
     new_ray: Option<[[NewRay; KERNELS]; 2]>,
+    /// New rays run the assembly kernel (`asm.rs`): on AVX2 machines where every tile is
+    /// checked (and not in a `stats` build, whose counters it does not keep).
+    asm: bool,
+    /// How many stack entries the assembly kernel may have below a node whose children it
+    /// pushes (`STACK - W`, but fewer in tests of the driver's spill, [`Tracer::with_asm_stack`]).
+    asm_stack: usize,
 }
 
 /// A single-ray kernel: [`Tracer::walk`] compiled for one instruction set, query kind, tile
@@ -1006,6 +1018,8 @@ impl<'s> Tracer<'s> {
             octant_kernels: None,
             kernels: Tracer::kernel_table(isa, all_checked),
             new_ray: Tracer::new_ray_table(isa, all_checked),
+            asm: Tracer::asm_kernel(isa, all_checked),
+            asm_stack: STACK - W,
             root: match scene.parts() {
                 // The part's root, as the top-level tree links to it (in range: checked by
                 // `Scene::open`).
@@ -1025,6 +1039,41 @@ impl<'s> Tracer<'s> {
         self.isa = isa;
         self.kernels = Tracer::kernel_table(isa, self.all_checked);
         self.new_ray = Tracer::new_ray_table(isa, self.all_checked);
+        self.asm = Tracer::asm_kernel(isa, self.all_checked);
+        self
+    }
+
+    /// Whether new rays on `isa` run the assembly kernel where every tile is checked (`all`).
+    fn asm_kernel(isa: packet::Isa, all: bool) -> bool {
+        #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+        if all && isa == packet::Isa::Avx2 && !cfg!(feature = "stats") {
+            return asm::supported();
+        }
+        let _ = (isa, all);
+        false
+    }
+
+    /// This tracer with new rays on the assembly kernel (`true`, where it would run) or on
+    /// the Rust kernels (`false`): for tests that compare the kernels.
+    #[doc(hidden)]
+    pub fn with_asm_kernel(mut self, on: bool) -> Tracer<'s> {
+        self.asm = on && Tracer::asm_kernel(self.isa, self.all_checked);
+        self
+    }
+
+    /// Whether new rays run the assembly kernel (`asm.rs`) where they would run the generic
+    /// AVX2 kernel.
+    #[doc(hidden)]
+    pub fn runs_asm_kernel(&self) -> bool {
+        self.asm
+    }
+
+    /// This tracer with the assembly kernel's stack cut to `entries` below a node whose
+    /// children it pushes (at least 1, at most `STACK - W`), so that it hands its walk to the
+    /// driver for room often: for tests of that hand-over.
+    #[doc(hidden)]
+    pub fn with_asm_stack(mut self, entries: usize) -> Tracer<'s> {
+        self.asm_stack = entries.clamp(1, STACK - W);
         self
     }
 
@@ -1044,6 +1093,7 @@ impl<'s> Tracer<'s> {
         self.all_checked = false;
         self.kernels = Tracer::kernel_table(self.isa, false);
         self.new_ray = None;
+        self.asm = false;
         self
     }
 
@@ -1407,6 +1457,12 @@ impl<'s> Tracer<'s> {
     fn unpaged_in<const ANY: bool>(&self, ray: &Ray, scratch: &mut Scratch) -> Option<Found> {
         if let Some(table) = &self.new_ray {
             let kernel = self.first_kernel::<true>(&mut scratch.streak, ray)?;
+            #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
+            if self.asm && kernel == GENERIC {
+                // SAFETY: `asm` is set only where the CPU runs the kernel and every tile is
+                // checked (`Tracer::asm_kernel`).
+                return unsafe { self.new_ray_asm::<ANY>(scratch, ray) };
+            }
             // SAFETY: the table holds kernels only for an instruction set the CPU has
             // (`Tracer::new_ray_table`), and `kernel` is below `KERNELS`.
             return unsafe { table[ANY as usize].get_unchecked(kernel)(self, scratch, ray) };
@@ -1525,8 +1581,10 @@ impl<'s> Tracer<'s> {
                     w.sp = n;
                 }
                 Event::Full => {
-                    // The bottom half of the fixed stack goes to the spill.
-                    let n = STACK / 2;
+                    // The bottom half of the fixed stack goes to the spill (all of it when
+                    // less is on it: the assembly kernel's stack may be cut short in tests,
+                    // `Tracer::with_asm_stack`).
+                    let n = (STACK / 2).min(w.sp);
                     spill.extend_from_slice(&w.fixed[..n]);
                     w.fixed.copy_within(n..w.sp, 0);
                     w.sp -= n;
