@@ -934,6 +934,7 @@ pub struct Tracer<'s> {
     asm: bool,
     /// How many stack entries the assembly kernel may have below a node whose children it
     /// pushes (`STACK - W`, but fewer in tests of the driver's spill, [`Tracer::with_asm_stack`]).
+    #[cfg_attr(not(all(target_arch = "x86_64", target_os = "linux")), allow(dead_code))]
     asm_stack: usize,
 }
 

@@ -8,7 +8,7 @@
 # 0 the stack ran empty (the ray is done), 1 an any-hit query found a hit, 2 an edge lies
 # exactly on the ray (`Event::Exact`), 3 the fixed stack is full (`Event::Full`).
 #
-# Registers, throughout:
+# Registers, after the set-up:
 #   rdi      the AsmRay                    rsi      the stack pointer (next free Entry)
 #   r8-r10   near rows x, y, z             r11-r13  far rows x, y, z
 #            (each: the pool's address plus the row's byte offset in a node)
@@ -17,9 +17,10 @@
 #   ymm6-8   -FAR_EPS/d                    ymm9     t_min
 #   ymm10    the closest hit times FAR_EPS (its low lane the scalar the pops compare with)
 #   rbx rbp r15 rcx rdx, ymm11-15: scratch. A leaf test takes ymm0-8 and ymm10 as well and
-#   reloads them from the AsmRay after the leaf (MRK_RELOAD).
+#   reloads them after the leaf (MRK_RELOAD: from the frame, the closest hit from the AsmRay).
 #
-# Operands in braces are Rust constants (`global_asm!` in asm.rs): the AsmRay's field offsets.
+# Operands in braces are Rust constants (`global_asm!` in asm.rs): the AsmRay's field offsets,
+# that of a node's child references, FAR_EPS and TINY as bits.
 
 # The machine stack frame (rsp aligned to 32 bytes).
 .set MRK_F_NEAR, 0          # the box test's entry distances (8 floats)
@@ -367,6 +368,7 @@
     mov rax, qword ptr [rdi + {root}]
     jmp .Ldescend_\any
 
+    .p2align 4
 .Lpop_\any:
     cmp rsi, qword ptr [rsp + MRK_F_STACK]
     je .Lempty_\any
@@ -379,6 +381,7 @@
 .endif
     mov rax, qword ptr [rsi]
 
+    .p2align 4
 .Ldescend_\any:
     bt rax, 62
     jc .Lleaf_\any
@@ -418,6 +421,7 @@
     mov rax, qword ptr [rdx + 8 * rbx]
     jmp .Ldescend_\any
 
+    .p2align 4
 .Lmany_\any:
     # Two or more children: pushes ahead (rax still the node's reference).
     cmp rsi, qword ptr [rsp + MRK_F_LIMIT]
@@ -500,6 +504,7 @@
     jmp .Ldescend_\any
 .endif
 
+    .p2align 4
 .Lleaf_\any:
     test rax, rax
     js .Lpop_\any                       # an empty slot
@@ -513,6 +518,7 @@
     mov rbx, qword ptr [rsp + MRK_F_KB]
     mov rbp, qword ptr [rsp + MRK_F_KB + 8]
     mov r15, qword ptr [rsp + MRK_F_KB + 16]
+    .p2align 4
 .Lblock_\any:
     mov rax, qword ptr [rsp + MRK_F_UNIT]
     shl rax, 4
