@@ -107,7 +107,7 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     let bars = progress::Bars::new(cli.quiet);
-    if let Err(e) = megaray_trace::packet::Isa::from_env() {
+    if let Err(e) = megaray_trace::packet::Isa::from_env().and(megaray_trace::asm_from_env()) {
         eprintln!("megaray: error: {e}");
         std::process::exit(1);
     }

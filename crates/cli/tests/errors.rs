@@ -226,3 +226,13 @@ fn an_unknown_instruction_set_is_a_clear_error() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.starts_with("megaray: error: MEGARAY_ISA: unknown instruction set \"neon\""), "{err}");
 }
+
+#[test]
+fn a_bad_assembly_kernel_switch_is_a_clear_error() {
+    let out = std::process::Command::new(bin()).args(["info", "grid:4"]).env("MEGARAY_ASM", "maybe").output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.starts_with("megaray: error: MEGARAY_ASM: unknown value \"maybe\""), "{err}");
+}

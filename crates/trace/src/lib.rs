@@ -1048,7 +1048,7 @@ impl<'s> Tracer<'s> {
     fn asm_kernel(isa: packet::Isa, all: bool) -> bool {
         #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
         if all && isa == packet::Isa::Avx2 && !cfg!(feature = "stats") {
-            return asm::supported();
+            return asm_enabled() && asm::supported();
         }
         let _ = (isa, all);
         false
@@ -2096,6 +2096,31 @@ fn new_ray_avx512<const ANY: bool, const OCT: usize>(t: &Tracer<'_>, s: &mut Scr
 #[inline(never)]
 fn walk_baseline<const ANY: bool, const ALL: bool>(t: &Tracer<'_>, w: &mut Walk<'_>, ray: &Ray) -> Event {
     t.walk::<false, ANY, ALL, { usize::MAX }>(w, ray)
+}
+
+/// The environment variable that turns the assembly kernel (`asm.rs`) off (`0`) or on (`1`,
+/// the default where it runs), to compare it with the compiled kernels or rule it out.
+pub const ASM_VAR: &str = "MEGARAY_ASM";
+
+/// Whether [`ASM_VAR`] lets new rays run the assembly kernel (unset or empty: yes), or an
+/// error naming the value when it is neither `0` nor `1`. (Front ends check it at start; the
+/// tracer reads it once and takes a bad value as unset.)
+pub fn asm_from_env() -> Result<bool, String> {
+    let Some(v) = std::env::var_os(ASM_VAR) else {
+        return Ok(true);
+    };
+    match v.to_string_lossy().trim() {
+        "" | "1" | "on" => Ok(true),
+        "0" | "off" => Ok(false),
+        other => Err(format!("{ASM_VAR}: unknown value {other:?} (use 0 to turn the assembly kernel off, 1 for on)")),
+    }
+}
+
+/// [`asm_from_env`], read once.
+#[cfg_attr(not(all(target_arch = "x86_64", target_os = "linux")), allow(dead_code))]
+fn asm_enabled() -> bool {
+    static ON: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ON.get_or_init(|| asm_from_env().unwrap_or(true))
 }
 
 /// The lanes of a block that hold triangles, when `left` triangles of a leaf remain.
