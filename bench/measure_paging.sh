@@ -2,8 +2,10 @@
 # Issue 4's out-of-core rendering figures: a scene much larger than the budget rendered
 # with no budget and with --mem, cold then warm (the same view three times: --orbit 3:0),
 # images compared, peak RSS; then a 100-frame camera path (a quarter orbit) with frame times
-# and bytes read; then the two tile load paths (map + WILLNEED against pread). About 40
-# minutes for plant:300M on a 2-core machine (the default-view path is disk-bound).
+# and bytes read. About 40 minutes for plant:300M on a 2-core machine (the default-view path
+# is disk-bound). PART=budget runs only issue 32's sequence instead: an unbudgeted render
+# (the page cache then holds the file as a mapped read leaves it), then renders with each
+# budget of MEMS, their peak RSS (the process's, from time -v) and frame times.
 # Needs root (drop_caches) and a built scene:
 #
 #   megaray gen plant:300M -o plant300M.ply && megaray build plant300M.ply -o plant300M.mray
@@ -15,10 +17,24 @@ MEM=${MEM:-2G}
 RES=${RES:-1024x768}
 OUT=${OUT:-$(dirname "$SCENE")}
 cargo build --profile dist -q -p megaray --manifest-path "$root/Cargo.toml" || exit 1
-cargo build --profile dist -q -p megaray-page --example load_paths --manifest-path "$root/Cargo.toml" || exit 1
 M=$root/target/dist/megaray
 drop() { sync; echo 3 > /proc/sys/vm/drop_caches 2>/dev/null || echo "(could not drop caches: figures are warm)"; }
 echo "scene $(ls -la "$SCENE" | awk '{print $5}') bytes; loadavg $(cut -d' ' -f1-3 /proc/loadavg)"
+if [ "${PART:-all}" = budget ]; then
+  drop
+  echo "== no budget, cold (reads the file through the map)"
+  /usr/bin/time -v $M render "$SCENE" -o "$OUT/budget-none.png" --res "$RES" --orbit 2:0 --json 2> "$OUT/budget-none.time"
+  grep -E "Elapsed|Maximum resident" "$OUT/budget-none.time"
+  grep -E "FileHugePages" /proc/meminfo
+  for mem in ${MEMS:-64M 256M 2G}; do
+    echo "== --mem $mem after it (frame 0 from the page cache as it was left, then warm)"
+    /usr/bin/time -v $M render "$SCENE" -o "$OUT/budget-$mem.png" --res "$RES" --orbit 3:0 --json --mem "$mem" \
+      > "$OUT/budget-$mem.jsonl" 2> "$OUT/budget-$mem.time"
+    cat "$OUT/budget-$mem.jsonl"
+    grep -E "Elapsed|Maximum resident" "$OUT/budget-$mem.time"
+  done
+  exit 0
+fi
 # Two views: the default camera (the whole plant: a frame needs several times a 2G budget)
 # and one inside the plant (INSIDE, a --cam-offset; its frames fit the budget).
 INSIDE=${INSIDE:-0.015,0.005,0.025}
@@ -49,5 +65,3 @@ for run in "deadline:$RES:${DEADLINE:-500}:" "full:$RES:none:" "inside:$RES:none
   tail -1 "$OUT/path-$name.jsonl"
   grep -E "Elapsed|Maximum resident" "$OUT/path-$name.time"
 done
-echo "== tile load paths, cold"
-"$root/target/dist/examples/load_paths" "$SCENE" 4000 1,2,8,16

@@ -65,13 +65,31 @@ pub fn u01(h: u32) -> f32 {
     (h >> 8) as f32 * (1.0 / 16_777_216.0)
 }
 
+/// This process's resident memory as the kernel counts it (`/proc/self/status`, Linux).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ProcessMemory {
+    /// Pages of mapped files (`RssFile`).
+    pub file: u64,
+    /// Anonymous pages (`RssAnon`): heap, stacks, and a pager's owned scene region.
+    pub anon: u64,
+    /// The peak of the whole resident set (`VmHWM`).
+    pub peak: u64,
+}
+
+/// This process's resident memory now, where the system reports it (Linux); `None` elsewhere.
+pub fn process_memory() -> Option<ProcessMemory> {
+    let s = std::fs::read_to_string("/proc/self/status").ok()?;
+    let kb = |key: &str| -> Option<u64> {
+        let line = s.lines().find(|l| l.starts_with(key))?;
+        Some(line.split_whitespace().nth(1)?.parse::<u64>().ok()? * 1024)
+    };
+    Some(ProcessMemory { file: kb("RssFile:")?, anon: kb("RssAnon:")?, peak: kb("VmHWM:")? })
+}
+
 /// This process's peak resident set size in bytes (`VmHWM` of `/proc/self/status`), where the
 /// system reports it (Linux); `None` elsewhere.
 pub fn peak_rss() -> Option<u64> {
-    let s = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
+    process_memory().map(|m| m.peak)
 }
 
 /// A triangle's three corners as plain arrays, the form triangles take on disk and in streams.

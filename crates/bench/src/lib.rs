@@ -340,7 +340,7 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
     let cam = Camera::framing(&bounds, opts.view.offset(), w, h);
     let pager = match opts.mem {
         Some(budget) => Some(
-            megaray_page::Pager::new(scene.clone(), megaray_page::PagerOptions { budget, fetchers: 8 })
+            megaray_page::Pager::open(scene.path(), megaray_page::PagerOptions { budget, fetchers: 8 })
                 .map_err(|e| BenchError::Option(e.to_string()))?,
         ),
         None => None,

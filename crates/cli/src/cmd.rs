@@ -469,8 +469,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         Some(p) => Some(read_exr(p)?.0),
         None => None,
     };
-    let scene = Arc::new(Scene::open(&a.scene)?);
-    let pager = a.paging.pager(&scene)?;
+    let (scene, pager) = a.paging.open(&a.scene)?;
     let b = scene.header().bounds;
     let (w, h) = a.res;
     let at = a.at.unwrap_or(b.center());

@@ -1,6 +1,7 @@
 //! The memory-budget options shared by the commands that trace (`render`, `bench`), their
 //! statistics, and the camera-path mode of `render`.
 
+use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -39,13 +40,15 @@ fn parse_mem(s: &str) -> Result<u64, String> {
 }
 
 impl PagingArgs {
-    /// The pager for `scene`, when a budget was given.
-    pub fn pager(&self, scene: &Arc<Scene>) -> Result<Option<Pager>> {
-        let Some(budget) = self.mem else { return Ok(None) };
+    /// Opens `path`: mapped without a budget; with one, read into memory of its own tile by
+    /// tile by a pager ([`Scene::open_owned`]).
+    pub fn open(&self, path: &Path) -> Result<(Arc<Scene>, Option<Pager>)> {
+        let Some(budget) = self.mem else { return Ok((Arc::new(Scene::open(path)?), None)) };
         if !(1..=64).contains(&self.fetchers) {
             bail!("--fetchers must be 1..=64");
         }
-        Ok(Some(Pager::new(scene.clone(), PagerOptions { budget, fetchers: self.fetchers })?))
+        let pager = Pager::open(path, PagerOptions { budget, fetchers: self.fetchers })?;
+        Ok((pager.scene().clone(), Some(pager)))
     }
 }
 
@@ -78,6 +81,8 @@ pub fn stats_json(pager: Option<&Pager>, jobs: &JobStats) -> serde_json::Value {
         "wait_seconds": jobs.wait_secs,
         "read_bytes": read_bytes(),
         "peak_rss": megaray_base::peak_rss(),
+        "rss_file": megaray_base::process_memory().map(|m| m.file),
+        "rss_anon": megaray_base::process_memory().map(|m| m.anon),
     })
 }
 
@@ -111,8 +116,14 @@ pub fn print_stats(pager: Option<&Pager>, jobs: &JobStats) {
     if let Some(r) = read_bytes() {
         eprintln!("read from storage: {}", format_size(r));
     }
-    if let Some(r) = megaray_base::peak_rss() {
-        eprintln!("peak memory (RSS): {}", format_size(r));
+    if let Some(m) = megaray_base::process_memory() {
+        eprintln!(
+            "process memory (RSS): {} now ({} file-backed, {} anonymous), peak {}",
+            format_size(m.file + m.anon),
+            format_size(m.file),
+            format_size(m.anon),
+            format_size(m.peak)
+        );
     }
 }
 

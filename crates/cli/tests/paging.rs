@@ -58,7 +58,7 @@ fn a_budget_of_a_few_tiles_gives_the_hits_of_no_budget() {
     let shown = want.iter().filter(|a| a.is_some()).count();
     assert!(shown > 500, "the view shows the model ({shown} hits)");
     let budget = Pager::min_budget(&scene) + (64 << 10);
-    let pager = Pager::new(scene.clone(), PagerOptions { budget, fetchers: 2 }).unwrap();
+    let pager = Pager::open(scene.path(), PagerOptions { budget, fetchers: 2 }).unwrap();
     let tracer = Tracer::paged(&pager);
     for round in 0..2 {
         let (got, s) = pool(4).install(|| frame(&tracer, &cam));
@@ -83,7 +83,7 @@ fn a_budget_of_a_few_tiles_gives_the_hits_of_no_budget() {
 fn a_budget_too_small_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let scene = scene(dir.path(), "plant:60k");
-    let err = Pager::new(scene.clone(), PagerOptions { budget: 4096, fetchers: 1 }).err().unwrap().to_string();
+    let err = Pager::open(scene.path(), PagerOptions { budget: 4096, fetchers: 1 }).err().unwrap().to_string();
     assert!(err.contains("paged.mray") && err.contains("too small") && err.contains("at least"), "{err}");
 }
 
@@ -104,7 +104,7 @@ fn stress_many_threads_tiny_budget_many_frames() {
         })
         .collect();
     let want: Vec<Vec<Answer>> = cams.iter().map(|c| pool(2).install(|| frame(&plain, c).0)).collect();
-    let pager = Pager::new(scene.clone(), PagerOptions { budget: Pager::min_budget(&scene), fetchers: 3 }).unwrap();
+    let pager = Pager::open(scene.path(), PagerOptions { budget: Pager::min_budget(&scene), fetchers: 3 }).unwrap();
     let tracer = Tracer::paged(&pager);
     let stop = std::sync::atomic::AtomicBool::new(false);
     let violations = std::sync::atomic::AtomicU64::new(0);
@@ -125,7 +125,7 @@ fn stress_many_threads_tiny_budget_many_frames() {
                     let _pin = pager.pin();
                     if pager.acquire(t) == Access::Ready {
                         let g = pager.release_count(t);
-                        assert!(scene.check_tile(t).is_ok());
+                        assert!(pager.scene().check_tile(t).is_ok(), "a resident tile reads as loaded");
                         std::thread::yield_now();
                         if pager.release_count(t) != g {
                             violations.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -161,7 +161,7 @@ fn a_corrupt_tile_is_reported_by_file_and_tile() {
     bytes[off as usize] ^= 0x40;
     std::fs::write(&path, &bytes).unwrap();
     let scene = Arc::new(Scene::open(&path).unwrap());
-    let pager = Pager::new(scene.clone(), PagerOptions { budget: 1 << 30, fetchers: 2 }).unwrap();
+    let pager = Pager::open(scene.path(), PagerOptions { budget: 1 << 30, fetchers: 2 }).unwrap();
     let tracer = Tracer::paged(&pager);
     // Ask for every tile, so the damaged one is met whatever the view.
     for i in 0..scene.tiles().len() as u32 {

@@ -1,6 +1,6 @@
 //! # megaray-page: a scene file within a memory budget
 //!
-//! A [`Pager`] keeps the resident part of a memory-mapped [`Scene`] under a budget, the way
+//! A [`Pager`] keeps the resident part of a [`Scene`] under a budget, the way
 //! the seed's out-of-core ray tracer did for the Boeing 777 (Wald et al. 2004, "Interactive
 //! out-of-core rendering"), with today's tools:
 //!
@@ -12,15 +12,18 @@
 //!   after its *available* bit was seen under a [`Pin`].
 //! - **Asynchronous fetchers** (threads): take requests, deduplicated (one queue entry per
 //!   tile, the *requested* bit), most-wanted first (a count of the rays that asked), read
-//!   the tile's pages (madvise WILLNEED, then the checksum pass touches every byte through
-//!   the map), verify its checksum and references ([`Scene::check_tile`]) and publish it.
+//!   the tile's byte ranges with `pread` into the scene's own memory ([`Scene::load`] of a
+//!   scene opened with [`Scene::open_owned`]: nothing of the file is mapped, so resident
+//!   memory is exactly what was read, whatever the page cache holds), verify its checksum
+//!   and references ([`Scene::check_tile`]) and publish it.
 //! - **Second-chance eviction** (clock) whenever resident tile bytes would pass the budget:
 //!   a hand sweeps the tile numbers; a referenced tile loses its bit and survives one
 //!   sweep, an unreferenced one is evicted. Victims stop being *available*, then a grace
 //!   period (epochs, below) waits until no thread can still be reading them, then their
-//!   pages are released: madvise(DONTNEED) out of this process, posix_fadvise(DONTNEED) out
-//!   of the page cache. Eviction runs down to a low watermark (15/16 of the budget) so that
-//!   grace periods are few.
+//!   pages are released ([`Scene::release`]: madvise DONTNEED of the owned memory). The
+//!   page cache is the operating system's: a tile read again soon may come from it.
+//!   Eviction runs down to a low watermark (15/16 of the budget) so that grace periods are
+//!   few.
 //! - **Pins and grace periods.** A tracing thread holds a [`Pin`] while it traverses (a ray,
 //!   or a sample's few rays); pins count into per-thread stripes of two epoch parities.
 //!   The evictor flips the epoch and waits for the old parity's counts to drain (classic
@@ -32,15 +35,12 @@
 //! slots ([`Scene::tile_ranges`]), each range widened to whole pages.
 //!
 //! ```no_run
-//! use std::sync::Arc;
-//! use megaray_scene::Scene;
 //! use megaray_page::{Pager, PagerOptions};
-//! let scene = Arc::new(Scene::open("big.mray".as_ref()).unwrap());
-//! let pager = Pager::new(scene.clone(), PagerOptions { budget: 2 << 30, fetchers: 2 }).unwrap();
+//! let pager = Pager::open("big.mray".as_ref(), PagerOptions { budget: 2 << 30, fetchers: 2 }).unwrap();
 //! // Hand `&pager` to megaray_trace::Tracer::paged; print pager.stats() after a frame.
 //! ```
 
-use std::fs::File;
+use std::path::Path;
 use std::sync::atomic::{fence, AtomicBool, AtomicU32, AtomicU64, AtomicUsize, Ordering::*};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
@@ -48,7 +48,7 @@ use std::time::{Duration, Instant};
 
 use crossbeam::utils::CachePadded;
 use megaray_base::format_size;
-use megaray_scene::{Scene, SceneError};
+use megaray_scene::{Scene, SceneError, SceneErrorKind};
 
 /// The tile's bytes are resident and checked: traversal may read them (under a [`Pin`]).
 const AVAIL: u32 = 1;
@@ -98,8 +98,10 @@ pub struct PagerOptions {
 pub enum PagerError {
     #[error("{path}: a memory budget of {budget} is too small for this scene: at least {need} (its tables take {pinned} and its largest tile {tile})")]
     BudgetTooSmall { path: String, budget: String, need: String, pinned: String, tile: String },
-    #[error("{path}: cannot open for paging: {msg}")]
-    Io { path: String, msg: String },
+    #[error("{path}: a pager needs the scene opened with Scene::open_owned (this one is mapped)")]
+    Mapped { path: String },
+    #[error(transparent)]
+    Scene(#[from] SceneError),
 }
 
 /// Counters since the pager started. See [`Pager::stats`].
@@ -128,6 +130,10 @@ pub struct PagerStats {
     /// Seconds fetchers spent loading and checking tiles, and waiting for grace periods.
     pub load_secs: f64,
     pub grace_secs: f64,
+    /// The whole process's resident memory as the kernel counts it, when the stats were
+    /// taken (Linux): file-backed pages (a pager maps none of the scene) and anonymous ones
+    /// (the scene's resident tiles among them), beside the pager's own accounting above.
+    pub process: Option<megaray_base::ProcessMemory>,
 }
 
 impl PagerStats {
@@ -149,8 +155,6 @@ pub struct Pager {
 
 struct Shared {
     scene: Arc<Scene>,
-    /// For posix_fadvise on eviction.
-    file: File,
     state: Vec<AtomicU32>,
     /// How many rays asked for each requested tile (the queue's priority).
     want: Vec<AtomicU32>,
@@ -233,19 +237,20 @@ fn costs(scene: &Scene) -> (Vec<u64>, u64) {
     (tiles, sum(&scene.pinned_ranges()))
 }
 
-/// (The page cache's one `posix_fadvise` wrapper lives with the scene file, which uses it
-/// too; re-exported here, where the pager and its examples use it.)
-pub use megaray_scene::drop_page_cache;
-
 impl Pager {
-    /// Starts paging `scene` within `opts.budget` bytes: the pinned tables are made resident
-    /// now, tiles when traversal first asks for them. Fails when the budget cannot hold the
-    /// tables plus two of the largest tiles.
+    /// Opens `path` for paging ([`Scene::open_owned`]) and starts a pager on it.
+    pub fn open(path: &Path, opts: PagerOptions) -> Result<Pager, PagerError> {
+        Pager::new(Arc::new(Scene::open_owned(path)?), opts)
+    }
+
+    /// Starts paging `scene` (opened with [`Scene::open_owned`], whose tables are resident
+    /// already) within `opts.budget` bytes: tiles are read when traversal first asks for
+    /// them. Fails when the budget cannot hold the tables plus two of the largest tiles.
     pub fn new(scene: Arc<Scene>, opts: PagerOptions) -> Result<Pager, PagerError> {
         let path = scene.path().display().to_string();
-        let io = |e: std::io::Error| PagerError::Io { path: path.clone(), msg: e.to_string() };
-        let file = File::open(scene.path()).map_err(io)?;
-        scene.advise_random().map_err(io)?;
+        if !scene.is_owned() {
+            return Err(PagerError::Mapped { path });
+        }
         let n = scene.tiles().len();
         let (cost, pinned) = costs(&scene);
         let max_tile = cost.iter().copied().max().unwrap_or(0);
@@ -259,21 +264,8 @@ impl Pager {
                 tile: format_size(max_tile),
             });
         }
-        // Make the pinned tables resident now (one pass over them).
-        let bytes = scene.bytes();
-        let mut sum = 0u8;
-        for (o, l) in scene.pinned_ranges() {
-            let end = (o + l).min(bytes.len() as u64);
-            let mut i = o / PAGE * PAGE;
-            while i < end {
-                sum ^= bytes[i as usize];
-                i += PAGE;
-            }
-        }
-        std::hint::black_box(sum);
         let stripes = || (0..STRIPES).map(|_| CachePadded::new(AtomicUsize::new(0))).collect::<Box<[_]>>();
         let shared = Arc::new(Shared {
-            file,
             state: (0..n).map(|_| AtomicU32::new(0)).collect(),
             want: (0..n).map(|_| AtomicU32::new(0)).collect(),
             cost,
@@ -411,6 +403,7 @@ impl Pager {
             tile_budget: s.tile_budget,
             load_secs: s.load_ns.load(Relaxed) as f64 * 1e-9,
             grace_secs: s.grace_ns.load(Relaxed) as f64 * 1e-9,
+            process: megaray_base::process_memory(),
         }
     }
 
@@ -531,22 +524,23 @@ impl Shared {
         let t0 = Instant::now();
         let scene = &*self.scene;
         let ranges = scene.tile_ranges(t).unwrap_or_default();
+        // Read every range (on a failure, those read are released again), then check.
+        let mut read = 0;
+        let mut checked = Ok(());
         for &(o, l) in &ranges {
-            let _ = scene.will_need(o, l);
+            if let Err(e) = scene.load(o, l) {
+                checked = Err(SceneError::new(scene.path(), SceneErrorKind::Io, format!("tile {t}: cannot read: {e}")));
+                break;
+            }
+            read += 1;
         }
-        // The check reads every byte of the tile through the map (faulting its pages in);
-        // the attribute ranges are touched a page at a time.
-        let checked = scene.check_tile(t);
-        let bytes = scene.bytes();
-        let mut sum = 0u8;
-        for &(o, l) in &ranges[1..] {
-            let mut i = o;
-            while i < o + l {
-                sum ^= bytes[i as usize];
-                i = (i / PAGE + 1) * PAGE;
+        if checked.is_ok() {
+            checked = scene.check_tile(t);
+        } else {
+            for &(o, l) in &ranges[..read] {
+                let _ = scene.release(o, l);
             }
         }
-        std::hint::black_box(sum);
         self.load_ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
         let word = &self.state[t as usize];
         match checked {
@@ -563,7 +557,9 @@ impl Shared {
             Err(e) => {
                 self.corrupt.fetch_add(1, Relaxed);
                 lock(&self.first_error).get_or_insert(e);
-                self.release(t);
+                if read == ranges.len() {
+                    self.release(t);
+                }
                 lock(&self.clock).bytes -= cost;
                 word.fetch_or(CORRUPT, SeqCst);
                 word.fetch_and(!REQ, SeqCst);
@@ -631,12 +627,11 @@ impl Shared {
         victims
     }
 
-    /// Drops tile `t`'s pages from this process and from the page cache.
+    /// Drops tile `t`'s pages from this process.
     fn release(&self, t: u32) {
         self.releases[t as usize].fetch_add(1, SeqCst);
         for (o, l) in self.scene.tile_ranges(t).unwrap_or_default() {
             let _ = self.scene.release(o, l);
-            drop_page_cache(&self.file, o, l);
         }
     }
 }

@@ -12,18 +12,23 @@
 //! ```
 //!
 //! The top-level tree's leaves name parts; each part is an 8-wide BVH cut into tiles of
-//! about [`Header::tile_target`] bytes, the unit that paging loads and evicts. Nodes refer
-//! to nodes of their own tile by index and to other tiles by links, so traversal knows
-//! exactly when it is about to enter a tile. `docs/FORMAT.md` gives every byte.
+//! about [`Header::tile_target`] bytes, the unit that paging loads and evicts. Child
+//! references hold absolute positions in the file; a reference into another tile is a link
+//! that names that tile, so traversal knows exactly when it is about to enter one.
+//! `docs/FORMAT.md` gives every byte.
 //!
 //! - [`SceneWriter`] writes a file part by part (the builder drives it);
 //! - [`Scene::open`] maps a file and checks every table into a typed [`SceneError`];
-//!   tiles are checked (checksum, references) the first time they are used.
+//!   tiles are checked (checksum, references) the first time they are used;
+//! - [`Scene::open_owned`] reads only the tables, into anonymous memory, for a pager that
+//!   then reads tiles in and drops them ([`Scene::load`], [`Scene::release`]).
 //!
 //! ## Safety contract
-//! A [`Scene`] maps its file. Do not truncate or rewrite a scene file while a process has
-//! it open; replace it by renaming a new file over it (as `megaray build` does).
+//! A mapped [`Scene`] maps its file: do not truncate or rewrite a scene file while a process
+//! has it open; replace it by renaming a new file over it (as `megaray build` does). An
+//! owned scene reads with `pread`, so a truncated file makes a load fail with an error.
 
+mod backing;
 pub mod error;
 pub mod format;
 pub mod reader;

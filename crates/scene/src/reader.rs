@@ -1,5 +1,5 @@
-//! Opening a scene file: map it, check the header and every table, and hand out typed
-//! views. Tiles are checked lazily, the first time traversal enters them (checksum and
+//! Opening a scene file: map it (or, for a pager, read its tables into memory of its own),
+//! check the header and every table, and hand out typed views. Tiles are checked lazily, the first time traversal enters them (checksum and
 //! every reference in range), so opening a file of any size reads only its tables.
 
 use std::fs::File;
@@ -8,6 +8,8 @@ use std::sync::atomic::{AtomicU32, AtomicU8, Ordering};
 use std::sync::{Mutex, OnceLock};
 
 use memmap2::Mmap;
+
+use crate::backing::{Backing, Region};
 
 use crate::error::{SceneError, SceneErrorKind};
 use crate::format::*;
@@ -48,10 +50,10 @@ impl CheckedTiles<'_> {
 }
 const TILE_CORRUPT: u8 = 2;
 
-/// An open, checked, memory-mapped scene file.
+/// An open, checked scene file: mapped, or owned by a pager ([`Scene::open_owned`]).
 pub struct Scene {
     path: PathBuf,
-    map: Mmap,
+    backing: Backing,
     header: Header,
     tile_state: Vec<AtomicU8>,
     /// How many of `tile_state` are [`TILE_OK`] ([`Scene::all_tiles_checked`]).
@@ -180,8 +182,23 @@ fn range(off: u64, len: u64, file: u64) -> Option<std::ops::Range<usize>> {
 }
 
 impl Scene {
-    /// Opens and checks `path`. Every fault is a [`SceneError`] naming the file and the fault.
+    /// Opens and checks `path`, mapped: the operating system pages the file on demand (for
+    /// scenes traced in core). Every fault is a [`SceneError`] naming the file and the fault.
     pub fn open(path: &Path) -> Result<Scene, SceneError> {
+        Scene::open_as(path, false)
+    }
+
+    /// Opens and checks `path` for a pager ([`Scene::is_owned`]): nothing of the file is
+    /// mapped; the header page and tables are read now into a region of anonymous memory
+    /// that mirrors the file's offsets, and tiles are read into it by [`Scene::load`] and
+    /// dropped by [`Scene::release`]. Resident memory is then exactly what was loaded,
+    /// whatever state the page cache is in (`docs/ARCHITECTURE.md`, Paging). Also checks
+    /// that no two tiles' byte ranges overlap (the region shares only partly covered pages).
+    pub fn open_owned(path: &Path) -> Result<Scene, SceneError> {
+        Scene::open_as(path, true)
+    }
+
+    fn open_as(path: &Path, owned: bool) -> Result<Scene, SceneError> {
         let file = File::open(path).map_err(|e| SceneError::io(path, "open", &e))?;
         let len = file.metadata().map_err(|e| SceneError::io(path, "stat", &e))?.len();
         if len < 256 {
@@ -191,11 +208,19 @@ impl Scene {
                 format!("too short to be a scene file ({len} bytes)"),
             ));
         }
-        // SAFETY: the map is read-only and private to this process. The contract (stated in
-        // the crate docs) is that nobody truncates or rewrites a scene file while it is open:
-        // megaray itself only ever replaces scene files by rename, which leaves this mapping
-        // intact. Every view handed out is bounds-checked against the mapped length.
-        let map = unsafe { Mmap::map(&file) }.map_err(|e| SceneError::io(path, "map", &e))?;
+        let backing = if owned {
+            let r = Region::new(file, len).map_err(|e| SceneError::io(path, "reserve memory for", &e))?;
+            r.load(0, 256).map_err(|e| SceneError::io(path, "read", &e))?;
+            Backing::Owned(r)
+        } else {
+            // SAFETY: the map is read-only and private to this process. The contract (stated
+            // in the crate docs) is that nobody truncates or rewrites a scene file while it
+            // is open: megaray itself only ever replaces scene files by rename, which leaves
+            // this mapping intact. Every view handed out is bounds-checked against the
+            // mapped length.
+            Backing::Mapped(unsafe { Mmap::map(&file) }.map_err(|e| SceneError::io(path, "map", &e))?)
+        };
+        let map = backing.bytes();
         let header: Header = bytemuck::pod_read_unaligned(&map[..256]);
         if header.magic != MAGIC {
             return Err(SceneError::new(
@@ -237,6 +262,13 @@ impl Scene {
             .ok_or_else(|| bad("tile directory lies outside the file"))?;
         let mats = range(header.materials_off, header.materials_bytes, len)
             .ok_or_else(|| bad("material table lies outside the file"))?;
+        if let Backing::Owned(r) = &backing {
+            // The tables stay loaded while the scene is open (the header page is).
+            for t in [&top, &parts, &tiles, &mats] {
+                r.load(t.start as u64, t.len() as u64).map_err(|e| SceneError::io(path, "read", &e))?;
+            }
+        }
+        let map = backing.bytes();
         let mut meta = xxhash_rust::xxh3::Xxh3::new();
         for r in [&top, &parts, &tiles, &mats] {
             meta.update(&map[r.clone()]);
@@ -253,17 +285,49 @@ impl Scene {
             first_error: Mutex::new(None),
             materials,
             header,
-            map,
+            backing,
             tile_index: OnceLock::new(),
         };
         scene.check_tables()?;
+        if owned {
+            scene.check_disjoint()?;
+        }
         Ok(scene)
+    }
+
+    /// For an owned scene: no byte belongs to two tiles, or to a tile and a table (a page
+    /// may: [`Region`] counts those). Otherwise releasing one tile could drop bytes that
+    /// another still uses.
+    fn check_disjoint(&self) -> Result<(), SceneError> {
+        let mut tiles: Vec<(u64, u64, u32)> = Vec::new();
+        for t in 0..self.header.tile_count {
+            tiles.extend(self.tile_ranges(t).unwrap_or_default().into_iter().map(|(o, l)| (o, l, t)));
+        }
+        tiles.retain(|&(_, l, _)| l > 0);
+        tiles.sort_unstable();
+        let overlap = |a: String, b: u32, at: u64| {
+            SceneError::corrupt(&self.path, format!("{a} and tile {b} overlap at byte {at}"))
+        };
+        for w in tiles.windows(2) {
+            if w[0].0 + w[0].1 > w[1].0 {
+                return Err(overlap(format!("tile {}", w[0].2), w[1].2, w[1].0));
+            }
+        }
+        // The header itself is 256 bytes (the rest of its page is padding).
+        let tables = self.pinned_ranges().into_iter().map(|(o, l)| if o == 0 { (0, 256) } else { (o, l) });
+        for (o, l) in tables.filter(|&(_, l)| l > 0) {
+            let i = tiles.partition_point(|&(to, tl, _)| to + tl <= o);
+            if let Some(&(to, _, t)) = tiles.get(i).filter(|&&(to, _, _)| to < o + l) {
+                return Err(overlap("a table".into(), t, to.max(o)));
+            }
+        }
+        Ok(())
     }
 
     fn check_tables(&self) -> Result<(), SceneError> {
         let h = &self.header;
         let bad = |what: String| SceneError::corrupt(&self.path, what);
-        let len = self.map.len() as u64;
+        let len = self.bytes().len() as u64;
         let tiles = self.tiles();
         let top0 = h.top_nodes_off / NODE_BYTES as u64;
         for (i, n) in self.top_nodes().iter().enumerate() {
@@ -343,19 +407,20 @@ impl Scene {
     }
 
     /// The whole mapped file.
+    #[inline(always)]
     pub fn bytes(&self) -> &[u8] {
-        &self.map
+        self.backing.bytes()
     }
 
     /// The top-level tree; node 0 is the root.
     pub fn top_nodes(&self) -> &[Node8] {
         let off = self.header.top_nodes_off as usize;
-        bytemuck::cast_slice(&self.map[off..off + self.header.top_node_count as usize * NODE_BYTES])
+        bytemuck::cast_slice(&self.bytes()[off..off + self.header.top_node_count as usize * NODE_BYTES])
     }
 
     pub fn parts(&self) -> &[PartEntry] {
         let off = self.header.parts_off as usize;
-        bytemuck::cast_slice(&self.map[off..off + self.header.part_count as usize * 128])
+        bytemuck::cast_slice(&self.bytes()[off..off + self.header.part_count as usize * 128])
     }
 
     /// The whole file as an array of [`Node8`]s, 256-byte units from byte 0 (a tail shorter
@@ -365,12 +430,12 @@ impl Scene {
     /// slice instead of making a slice per tile it enters.
     #[inline]
     pub fn node_pool(&self) -> &[Node8] {
-        bytemuck::cast_slice(&self.map[..self.map.len() / NODE_BYTES * NODE_BYTES])
+        bytemuck::cast_slice(&self.bytes()[..self.bytes().len() / NODE_BYTES * NODE_BYTES])
     }
 
     pub fn tiles(&self) -> &[TileEntry] {
         let off = self.header.tiles_off as usize;
-        bytemuck::cast_slice(&self.map[off..off + self.header.tile_count as usize * 40])
+        bytemuck::cast_slice(&self.bytes()[off..off + self.header.tile_count as usize * 40])
     }
 
     pub fn materials(&self) -> &[MaterialDesc] {
@@ -406,6 +471,9 @@ impl Scene {
         match state.load(Ordering::Acquire) {
             TILE_OK => true,
             TILE_CORRUPT => false,
+            // An owned scene's tiles are checked by its pager as it loads them; one not
+            // loaded reads as zeros and must not be judged corrupt here.
+            _ if self.is_owned() => false,
             _ => {
                 let ok = match self.check_tile(t) {
                     Ok(()) => true,
@@ -488,7 +556,7 @@ impl Scene {
     }
 
     fn tile_index(&self) -> &TileIndex {
-        self.tile_index.get_or_init(|| TileIndex::new(self.tiles(), self.map.len() as u64))
+        self.tile_index.get_or_init(|| TileIndex::new(self.tiles(), self.bytes().len() as u64))
     }
 
     /// The tile holding triangle slot `slot` of part `part` (its attributes are counted with
@@ -520,16 +588,11 @@ impl Scene {
         ]
     }
 
-    /// Memory advice for the whole mapping: random access (no read-ahead around faults;
-    /// a pager reads exactly the tiles it wants), and 4 KiB pages only (Linux: NOHUGEPAGE;
-    /// a file read before into 2 MiB folios, [`Scene::advise_huge_pages`], would otherwise be
-    /// mapped 2 MiB at a fault, past what the pager counts).
-    pub fn advise_random(&self) -> std::io::Result<()> {
-        // (A kernel built without transparent huge pages refuses this advice, EINVAL, and
-        // has none to avoid: not an error.)
-        #[cfg(target_os = "linux")]
-        let _ = self.map.advise(memmap2::Advice::NoHugePage);
-        self.map.advise(memmap2::Advice::Random)
+    /// Whether this scene was opened for a pager ([`Scene::open_owned`]): its tiles are
+    /// resident only between [`Scene::load`] and [`Scene::release`], and read as zeros
+    /// otherwise.
+    pub fn is_owned(&self) -> bool {
+        matches!(self.backing, Backing::Owned(_))
     }
 
     /// Asks for the mapping to be backed by 2 MiB pages where the kernel can, for a scene
@@ -538,25 +601,25 @@ impl Scene {
     /// file with 2 MiB pages where its page cache holds 2 MiB folios, which it makes when it
     /// reads the file into a mapping advised `HUGEPAGE` (madvise): pages read from now on
     /// (such as by [`Scene::check_all_tiles`]) come so; pages cached before stay as they
-    /// were ([`Scene::reread_in_huge_pages`] reads them again). Not for a paged scene: a
-    /// fault would read 2 MiB where the pager wants one tile. Advice only: where the kernel
-    /// cannot, nothing changes. A no-op off Linux.
+    /// were ([`Scene::reread_in_huge_pages`] reads them again). Advice only: where the
+    /// kernel cannot, nothing changes. A no-op off Linux and for an owned scene.
     pub fn advise_huge_pages(&self) -> std::io::Result<()> {
         #[cfg(target_os = "linux")]
-        self.map.advise(memmap2::Advice::HugePage)?;
+        if let Backing::Mapped(m) = &self.backing {
+            m.advise(memmap2::Advice::HugePage)?;
+        }
         Ok(())
     }
 
     /// [`Scene::advise_huge_pages`], and the file's pages cached before then written back
     /// and dropped from the page cache (`fdatasync`, `posix_fadvise` DONTNEED; pages mapped
     /// already stay), so that the next reads through the map bring the whole file back in
-    /// 2 MiB folios, from disk: for the benchmark, whose figures should not depend on how
-    /// the file was cached before. Measured on sphereflake:4 (207 MiB, 206 MiB then mapped
-    /// in 2 MiB pages): +2-8% diffuse, +2-3% shadow rays per second.
+    /// 2 MiB folios: for the benchmark, whose figures should not depend on how the file was
+    /// cached before (docs/PERF.md).
     pub fn reread_in_huge_pages(&self) -> std::io::Result<()> {
         self.advise_huge_pages()?;
         #[cfg(target_os = "linux")]
-        {
+        if !self.is_owned() {
             let file = File::open(&self.path)?;
             // Dirty pages (a scene just written) cannot be dropped.
             file.sync_data()?;
@@ -565,35 +628,52 @@ impl Scene {
         Ok(())
     }
 
-    /// Starts reading `len` bytes at `off` into the page cache (madvise WILLNEED).
-    /// The range is clamped to the file.
-    pub fn will_need(&self, off: u64, len: u64) -> std::io::Result<()> {
-        let (off, len) = self.clamp_pages(off, len);
-        if len == 0 {
-            return Ok(());
+    /// Makes the file's bytes `off..off + len` resident. Owned: reads them (widened to whole
+    /// pages) into the region; an error (a file truncated while open) leaves nothing
+    /// loaded. Mapped: asks for read-ahead (madvise WILLNEED) and touches every page.
+    pub fn load(&self, off: u64, len: u64) -> std::io::Result<()> {
+        match &self.backing {
+            Backing::Owned(r) => r.load(off, len),
+            Backing::Mapped(m) => {
+                let (off, len) = self.clamp_pages(off, len);
+                if len == 0 {
+                    return Ok(());
+                }
+                m.advise_range(memmap2::Advice::WillNeed, off, len)?;
+                let sum = m[off..off + len].iter().step_by(PAGE as usize).fold(0u8, |a, &b| a ^ b);
+                std::hint::black_box(sum);
+                Ok(())
+            }
         }
-        self.map.advise_range(memmap2::Advice::WillNeed, off, len)
     }
 
-    /// Drops the pages of `len` bytes at `off` (widened to whole pages) from this process
-    /// (madvise DONTNEED): resident memory falls, and the next access reads the file again.
-    /// The mapping is read-only, so nothing is lost. The caller guarantees that no thread
-    /// is reading those bytes (the pager waits for a grace period first): they would not
-    /// see garbage, but would fault the pages back in behind the pager's back.
+    /// Drops the bytes `off..off + len` (widened to whole pages) from this process's memory.
+    /// Owned: they read as zeros until loaded again (pages shared with another loaded range
+    /// stay until it is released too). Mapped: madvise DONTNEED, the next access faults the
+    /// file back in. The caller guarantees that no thread is reading those bytes (the pager
+    /// waits for a grace period first).
     pub fn release(&self, off: u64, len: u64) -> std::io::Result<()> {
-        let (off, len) = self.clamp_pages(off, len);
-        if len == 0 {
-            return Ok(());
+        match &self.backing {
+            Backing::Owned(r) => {
+                r.release(off, len);
+                Ok(())
+            }
+            Backing::Mapped(m) => {
+                let (off, len) = self.clamp_pages(off, len);
+                if len == 0 {
+                    return Ok(());
+                }
+                // SAFETY: DONTNEED on a read-only file mapping only discards this process's
+                // page table entries: later reads fault the same file bytes back in. No
+                // `&mut` to the map exists, and views handed out stay valid.
+                unsafe { m.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, off, len) }
+            }
         }
-        // SAFETY: DONTNEED on a read-only file mapping only discards this process's page
-        // table entries: later reads fault the same file bytes back in. No `&mut` to the map
-        // exists, and views handed out stay valid (same address, same contents).
-        unsafe { self.map.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, off, len) }
     }
 
     /// `(off, len)` widened to whole pages and clamped to the mapping.
     fn clamp_pages(&self, off: u64, len: u64) -> (usize, usize) {
-        let file = self.map.len() as u64;
+        let file = self.bytes().len() as u64;
         let start = (off / PAGE * PAGE).min(file);
         let end = off.saturating_add(len).div_ceil(PAGE).saturating_mul(PAGE).min(file);
         (start as usize, end.saturating_sub(start) as usize)
@@ -604,8 +684,8 @@ impl Scene {
         let nodes_end = e.offset as usize + e.node_count as usize * NODE_BYTES;
         let blocks_end = nodes_end + e.blocks as usize * 144;
         Tile {
-            nodes: bytemuck::cast_slice(&self.map[e.offset as usize..nodes_end]),
-            blocks: bytemuck::cast_slice(&self.map[nodes_end..blocks_end]),
+            nodes: bytemuck::cast_slice(&self.bytes()[e.offset as usize..nodes_end]),
+            blocks: bytemuck::cast_slice(&self.bytes()[nodes_end..blocks_end]),
             node0: e.node0(),
             unit0: e.unit0(),
         }
@@ -617,7 +697,7 @@ impl Scene {
         let e = tiles.get(t as usize).ok_or_else(|| SceneError::corrupt(&self.path, format!("no tile {t}")))?;
         let corrupt =
             |what: String| SceneError::new(&self.path, SceneErrorKind::CorruptTile(t), format!("tile {t}: {what}"));
-        let bytes = &self.map[e.offset as usize..e.offset as usize + e.bytes as usize];
+        let bytes = &self.bytes()[e.offset as usize..e.offset as usize + e.bytes as usize];
         if xxhash_rust::xxh3::xxh3_64(bytes) != e.checksum {
             return Err(corrupt("checksum mismatch (the file is damaged)".into()));
         }
@@ -668,7 +748,7 @@ impl Scene {
     fn attr<T: bytemuck::Pod>(&self, off: u64, prim: u32) -> T {
         let size = std::mem::size_of::<T>();
         let at = off as usize + prim as usize * size;
-        bytemuck::pod_read_unaligned(&self.map[at..at + size])
+        bytemuck::pod_read_unaligned(&self.bytes()[at..at + size])
     }
 
     /// The vertex normals of triangle slot `prim` of `part`, if the part has normals.

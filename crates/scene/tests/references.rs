@@ -196,7 +196,7 @@ fn all_tiles_checked_counts_sound_tiles_only() {
 
 /// A scene advised to 2 MiB pages ([`Scene::reread_in_huge_pages`]: written back and dropped from
 /// the page cache, the advice given) reads back the same, whether the kernel makes them or
-/// not; the pager's advice (4 KiB pages, random access) is accepted after it, on any kernel.
+/// not.
 #[test]
 fn huge_page_advice_keeps_the_scene_intact() {
     let dir = tempfile::tempdir().unwrap();
@@ -213,8 +213,57 @@ fn huge_page_advice_keeps_the_scene_intact() {
     assert!(reread.is_ok() || !thp, "{reread:?}");
     assert!(scene.check_all_tiles());
     assert_eq!(scene.bytes(), &before[..]);
-    scene.advise_random().unwrap();
-    assert_eq!(scene.bytes(), &before[..]);
+}
+
+/// A scene opened for a pager holds its tables only: a tile reads as zeros (and is not judged
+/// corrupt) until loaded, then as the file, and as zeros again once released.
+#[test]
+fn an_owned_scene_holds_what_was_loaded() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = good_scene(dir.path());
+    let file = std::fs::read(&good).unwrap();
+    let scene = Scene::open_owned(&good).unwrap();
+    assert!(scene.is_owned() && !Scene::open(&good).unwrap().is_owned());
+    assert_eq!(scene.tiles().len(), 2);
+    for t in 0..2u32 {
+        let e = scene.tiles()[t as usize];
+        let r = e.offset as usize..e.offset as usize + e.bytes as usize;
+        assert!(scene.bytes()[r.clone()].iter().all(|&b| b == 0), "tile {t} resident before a load");
+        assert!(!scene.tile_usable(t));
+        for (o, l) in scene.tile_ranges(t).unwrap() {
+            scene.load(o, l).unwrap();
+        }
+        assert_eq!(&scene.bytes()[r.clone()], &file[r.clone()]);
+        scene.check_tile(t).unwrap();
+        for (o, l) in scene.tile_ranges(t).unwrap() {
+            scene.release(o, l).unwrap();
+        }
+        assert!(scene.bytes()[r].iter().all(|&b| b == 0), "tile {t} resident after its release");
+    }
+    assert!(scene.first_error().is_none(), "a tile not loaded was judged corrupt");
+}
+
+/// An attribute array laid over a tile passes the mapped open's checks (it lies in the
+/// file) but not the owned one's: releasing one would drop the other's bytes.
+#[test]
+fn an_owned_scene_refuses_overlapping_ranges() {
+    use megaray_scene::format::PartEntry;
+    let dir = tempfile::tempdir().unwrap();
+    let good = good_scene(dir.path());
+    let mut b = std::fs::read(&good).unwrap();
+    let h: Header = bytemuck::pod_read_unaligned(&b[..256]);
+    let te = h.tiles_off as usize + 40;
+    let tile1: TileEntry = bytemuck::pod_read_unaligned(&b[te..te + 40]);
+    let pe = h.parts_off as usize;
+    let mut part: PartEntry = bytemuck::pod_read_unaligned(&b[pe..pe + 128]);
+    part.materials_off = tile1.offset;
+    b[pe..pe + 128].copy_from_slice(bytemuck::bytes_of(&part));
+    fix_checksums(&mut b);
+    let p = dir.path().join("laid-over.mray");
+    std::fs::write(&p, b).unwrap();
+    assert!(Scene::open(&p).is_ok());
+    let msg = Scene::open_owned(&p).err().expect("overlapping ranges should be refused").to_string();
+    assert!(msg.contains("laid-over.mray") && msg.contains("overlap") && msg.contains("tile 1"), "{msg}");
 }
 
 /// Tiles out of file order (the directory's second entry moved onto the first's offset,
