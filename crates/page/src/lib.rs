@@ -359,6 +359,10 @@ impl Pager {
         let old = word.fetch_or(REQ, SeqCst);
         if old & (REQ | AVAIL | CORRUPT) == 0 {
             s.requested.fetch_add(1, Relaxed);
+            // The read starts now; the fetcher that takes the request waits less for it.
+            for (o, l) in s.scene.tile_ranges(t).unwrap_or_default() {
+                s.scene.prefetch(o, l);
+            }
             lock(&s.queue).push(t);
             s.queue_cv.notify_one();
         } else if old & REQ == 0 {

@@ -647,6 +647,20 @@ impl Scene {
         }
     }
 
+    /// Starts reading the bytes `off..off + len` from storage without waiting, so that a
+    /// [`Scene::load`] of them soon after waits less (posix_fadvise or madvise WILLNEED).
+    pub fn prefetch(&self, off: u64, len: u64) {
+        match &self.backing {
+            Backing::Owned(r) => r.prefetch(off, len),
+            Backing::Mapped(m) => {
+                let (off, len) = self.clamp_pages(off, len);
+                if len > 0 {
+                    let _ = m.advise_range(memmap2::Advice::WillNeed, off, len);
+                }
+            }
+        }
+    }
+
     /// Drops the bytes `off..off + len` (widened to whole pages) from this process's memory.
     /// Owned: they read as zeros until loaded again (pages shared with another loaded range
     /// stay until it is released too). Mapped: madvise DONTNEED, the next access faults the
