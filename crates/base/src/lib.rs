@@ -2,6 +2,7 @@
 //!
 //! Nothing here knows about files, scenes or images. It holds:
 //! - [`Aabb`]: axis-aligned bounding boxes (build and trace both use them);
+//! - [`Camera`]: the pinhole camera and the benchmark framings (rays through pixels);
 //! - [`Ray`] and [`intersect_triangle`]: the scalar, watertight ray-triangle test
 //!   (Woop, Benthin and Wald 2013) that is the reference every faster kernel is tested against;
 //! - [`Progress`]: how long-running library code reports progress without knowing about terminals;
@@ -15,11 +16,13 @@
 //! ```
 
 mod aabb;
+mod camera;
 mod progress;
 mod ray;
 mod size;
 
 pub use aabb::Aabb;
+pub use camera::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use glam::Vec3;
 pub use progress::{NoProgress, Progress};
 pub use ray::{intersect_triangle, t_start, Ray, Rays16, TriHit, WatertightRay};

@@ -9,7 +9,8 @@
 use megaray_scene::format::{Node8, Tri4, NODE_BYTES};
 use megaray_scene::{BlobRef, TileBlob};
 
-use crate::bvh::{Bvh, Kid, Spare};
+use crate::bvh::spare::Spare;
+use crate::bvh::{Bvh, Kid};
 
 /// Tile arrays of parts written, for the next part's tiles ([`Spare`]): as many as a few
 /// parts' tiles. Every array is made with room for a whole tile of the target size, so that

@@ -107,7 +107,7 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     let bars = progress::Bars::new(cli.quiet);
-    if let Err(e) = megaray_trace::packet::Isa::from_env().and(megaray_trace::asm_from_env()) {
+    if let Err(e) = kernels_from_env().and_then(megaray_trace::Kernels::configure) {
         eprintln!("megaray: error: {e}");
         std::process::exit(1);
     }
@@ -125,6 +125,30 @@ fn main() {
         eprintln!("megaray: error: {}", one_line(&e));
         std::process::exit(1);
     }
+}
+
+/// The kernels the environment asks for, to compare paths: `MEGARAY_ISA` (`avx512`, `avx2`
+/// or `baseline`, as Embree's `isa=` chooses its own) and `MEGARAY_ASM` (`0` turns the
+/// assembly kernel off). Unset or empty: the fastest this machine has. A bad value is an
+/// error naming the variable.
+fn kernels_from_env() -> Result<megaray_trace::Kernels, String> {
+    let mut k = megaray_trace::Kernels::best();
+    let var = |name: &str| std::env::var(name).ok().filter(|v| !v.trim().is_empty());
+    if let Some(v) = var("MEGARAY_ISA") {
+        k.isa = megaray_trace::Isa::parse(&v).map_err(|e| format!("MEGARAY_ISA: {e}"))?;
+    }
+    if let Some(v) = var("MEGARAY_ASM") {
+        k.asm = match v.trim() {
+            "1" | "on" => true,
+            "0" | "off" => false,
+            other => {
+                return Err(format!(
+                    "MEGARAY_ASM: unknown value {other:?} (use 0 to turn the assembly kernel off, 1 for on)"
+                ))
+            }
+        };
+    }
+    Ok(k)
 }
 
 /// The error and its causes on one line.

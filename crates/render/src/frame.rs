@@ -9,7 +9,7 @@
 
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use megaray_base::{Aabb, Vec3};
 
@@ -17,74 +17,12 @@ use megaray_trace::jobs::{self, JobOptions, JobStats};
 use megaray_trace::{RayCaster, Suspended, Tracer};
 use rayon::prelude::*;
 
-use crate::camera::Camera;
 use crate::env::Environment;
 use crate::image_out::Image;
-use crate::material::TextureCache;
 use crate::sampling::{light_subset, pixel_offset, Sampler};
+use crate::settings::RenderSettings;
 use crate::shader::{ShadeCtx, Shader, SurfaceHit};
-use crate::shaders::Builtin;
-
-/// The direction toward the benchmark light, normalize(0.5, 1, 0.8).
-pub fn default_light() -> Vec3 {
-    Vec3::new(0.5, 1.0, 0.8).normalize()
-}
-
-/// How to render.
-#[derive(Clone, Debug)]
-pub struct RenderSettings {
-    /// The camera (and the image size).
-    pub camera: Camera,
-    /// Direction toward the directional light (normalised where used). It lights the
-    /// `diffuse` and `phong` shaders when there is no environment.
-    pub light: Vec3,
-    /// Samples per pixel per frame: sample `i` of a pixel sits at [`pixel_offset`]`(i)`, so 1
-    /// sample is the pixel centre in the first frame.
-    pub spp: u32,
-    /// Radiance of the sky where rays miss, when there is no environment map; also the
-    /// constant environment of the `env` shader then.
-    pub sky: [f32; 3],
-    /// Light reaching surfaces that the directional light does not (a constant ambient
-    /// term; not used under an environment).
-    pub ambient: f32,
-    /// Offset of secondary-ray origins along the normal, as a fraction of the scene diagonal.
-    pub eps_scale: f32,
-    /// The built-in shader (a custom one is set with [`Renderer::with_shader`]).
-    pub shader: Builtin,
-    /// Shadow rays per hit toward the environment's lights (0: every light of the subset);
-    /// rays per hit for ambient occlusion.
-    pub light_samples: u32,
-    /// Nesting limit of [`ShadeCtx::trace`] (mirror and glass bounces).
-    pub max_depth: u32,
-    /// Ambient occlusion distance, as a fraction of the scene diagonal.
-    pub ao_radius: f32,
-    /// Whether samples compute the AOVs (depth, normal, albedo).
-    pub aovs: bool,
-    /// End each frame after this long even if pixels are left (out-of-core rendering: the
-    /// pixels that wait for tiles are flagged in [`Frame::done`] and left to later frames).
-    pub frame_deadline: Option<Duration>,
-}
-
-impl RenderSettings {
-    /// The defaults for `camera`: the benchmark light, 1 sample per pixel, the `diffuse`
-    /// shader, 2 light samples, depth limit 6, no AOVs.
-    pub fn new(camera: Camera) -> RenderSettings {
-        RenderSettings {
-            camera,
-            light: default_light(),
-            spp: 1,
-            sky: [0.55, 0.7, 0.9],
-            ambient: 0.12,
-            eps_scale: 1e-4,
-            shader: Builtin::Diffuse,
-            light_samples: 2,
-            max_depth: 6,
-            ao_radius: 0.05,
-            aovs: false,
-            frame_deadline: None,
-        }
-    }
-}
+use crate::world::World;
 
 /// What one sample (or the average of a pixel's samples) yields.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -101,44 +39,40 @@ pub struct SampleOut {
     pub rays: u32,
 }
 
-/// Everything needed to shade samples: settings, shader, environment, texture cache. Shared
-/// by all threads.
+/// Everything needed to shade samples: the [`World`] (settings, environment, textures) and
+/// the shader. Shared by all threads. Reads as its world (`renderer.settings`,
+/// `renderer.background(dir)`), which it derefs to.
 pub struct Renderer {
-    /// The settings it renders with.
-    pub settings: RenderSettings,
+    world: World,
     shader: Arc<dyn Shader>,
-    env: Arc<Environment>,
-    has_env: bool,
-    eps: f32,
-    diagonal: f32,
-    textures: TextureCache,
     /// Frames run so far: the frame loop walks the pixels forward on even passes and
     /// backward on odd ones (see [`render_frame_with`]).
     passes: AtomicU32,
+}
+
+impl std::ops::Deref for Renderer {
+    type Target = World;
+    fn deref(&self) -> &World {
+        &self.world
+    }
+}
+
+impl std::ops::DerefMut for Renderer {
+    fn deref_mut(&mut self) -> &mut World {
+        &mut self.world
+    }
 }
 
 impl Renderer {
     /// A renderer for a scene with bounds `bounds`, shading with `settings.shader`, with the
     /// constant sky `settings.sky` as its (implicit) environment.
     pub fn new(settings: RenderSettings, bounds: &Aabb) -> Renderer {
-        let env = Environment::constant(settings.sky, Environment::DEFAULT_LIGHTS, Environment::DEFAULT_SUBSETS);
-        let diagonal = bounds.diagonal();
-        Renderer {
-            shader: Arc::new(settings.shader),
-            eps: settings.eps_scale * diagonal,
-            env: Arc::new(env),
-            has_env: false,
-            diagonal,
-            textures: TextureCache::default(),
-            passes: AtomicU32::new(0),
-            settings,
-        }
+        Renderer { shader: Arc::new(settings.shader), world: World::new(settings, bounds), passes: AtomicU32::new(0) }
     }
 
     /// Lights the scene with `env` (what misses see, and the lights of every shader).
     pub fn with_environment(mut self, env: Arc<Environment>) -> Renderer {
-        self.env = env;
-        self.has_env = true;
+        self.world.set_environment(env);
         self
     }
 
@@ -153,37 +87,9 @@ impl Renderer {
         &*self.shader
     }
 
-    /// The environment (the constant sky when none was given).
-    pub fn environment(&self) -> &Environment {
-        &self.env
-    }
-
-    /// Whether an environment was given ([`Renderer::with_environment`]).
-    pub fn has_environment(&self) -> bool {
-        self.has_env
-    }
-
-    /// What a ray in direction `dir` sees when it misses everything.
-    pub fn background(&self, dir: Vec3) -> Vec3 {
-        if self.has_env {
-            self.env.map.eval(dir.normalize_or_zero())
-        } else {
-            Vec3::from(self.settings.sky)
-        }
-    }
-
-    /// Secondary-ray offset (world units).
-    pub fn eps(&self) -> f32 {
-        self.eps
-    }
-
-    /// Length of the scene's bounding-box diagonal.
-    pub fn diagonal(&self) -> f32 {
-        self.diagonal
-    }
-
-    pub(crate) fn textures(&self) -> &TextureCache {
-        &self.textures
+    /// What the shaders see: settings, environment, textures.
+    pub fn world(&self) -> &World {
+        &self.world
     }
 
     /// One sample: sample `sample_index` of pixel (`px`, `py`). Deterministic: the same
@@ -197,8 +103,9 @@ impl Renderer {
     ) -> Result<SampleOut, Suspended> {
         let (ox, oy) = pixel_offset(sample_index);
         let ray = self.settings.camera.ray(px as f32 + ox, py as f32 + oy);
-        let subset = light_subset(px, py, sample_index, self.env.lights.subsets());
-        let mut ctx = ShadeCtx::new(self, caster, Sampler::new(px, py, sample_index), subset);
+        let subset = light_subset(px, py, sample_index, self.environment().lights.subsets());
+        let sampler = Sampler::new(px, py, sample_index);
+        let mut ctx = ShadeCtx::new(&self.world, &*self.shader, caster, sampler, subset);
         let mut out = SampleOut { depth: f32::INFINITY, ..SampleOut::default() };
         match ctx.intersect(&ray)? {
             None => out.radiance = self.background(ray.dir),

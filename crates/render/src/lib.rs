@@ -2,7 +2,7 @@
 //!
 //! The render crate turns rays into pictures. Its parts, one concept a module:
 //!
-//! - [`Camera`] (`camera.rs`): pinhole camera, the benchmark framings.
+//! - [`Camera`] (from `megaray-base`, re-exported): pinhole camera, the benchmark framings.
 //! - [`Shader`], [`ShadeCtx`], [`SurfaceHit`] (`shader.rs`): the interface called at each
 //!   hit; shaders fire arbitrary rays through [`megaray_trace::RayCaster`] (closest hit, any
 //!   hit, or recursively shaded). [`Builtin`] (`shaders/`): `normal`, `diffuse`, `phong`,
@@ -55,28 +55,28 @@
 #![warn(missing_docs)]
 
 mod accum;
-mod camera;
 mod env;
 mod frame;
 mod image_out;
 mod material;
 mod sampling;
+mod settings;
 mod shader;
 pub mod shaders;
 mod sky;
+mod world;
 
 pub use accum::{render_progressive, Accumulator, Stop};
-pub use camera::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
-pub use frame::{
-    default_light, render_frame, render_frame_with, Frame, FrameOptions, RenderSettings, Renderer, SampleOut, TILE,
-};
+pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, SampleOut, TILE};
 pub use image_out::{read_exr, save_exr, srgb, Aovs, Image, ImageError, ToneCurve, ToneMap};
 pub use material::{Material, DEFAULT_ALBEDO};
+pub use megaray_base::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use sampling::{light_subset, pixel_offset, Sampler};
+pub use settings::{default_light, Builtin, RenderSettings};
 pub use shader::{ShadeCtx, Shader, SurfaceHit};
-pub use shaders::Builtin;
 pub use sky::{write_env, SkySpec};
+pub use world::World;
 
 use megaray_trace::Tracer;
 

@@ -19,7 +19,7 @@
 //! struct RedBlue;
 //! impl Shader for RedBlue {
 //!     fn shade(&self, _ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
-//!         let shadow = ctx.spawn(hit, ctx.renderer().settings.light.normalize());
+//!         let shadow = ctx.spawn(hit, ctx.settings().light.normalize());
 //!         Ok(if ctx.occluded(&shadow)? { Vec3::Z } else { Vec3::X })
 //!     }
 //! }
@@ -30,9 +30,10 @@ use megaray_scene::Scene;
 use megaray_trace::{Hit, RayCaster, Suspended};
 
 use crate::env::DirLight;
-use crate::frame::Renderer;
 use crate::material::{material_at, Material};
 use crate::sampling::Sampler;
+use crate::settings::RenderSettings;
+use crate::world::World;
 
 /// Called when a ray hits a surface; returns the radiance leaving the hit toward the ray's
 /// origin. Implementations must be deterministic given the context's sampler (no other
@@ -81,9 +82,11 @@ impl SurfaceHit {
     }
 }
 
-/// What a shader may use: rays, the renderer's lights and settings, random numbers.
+/// What a shader may use: rays, the world's lights and settings, random numbers.
 pub struct ShadeCtx<'a> {
-    renderer: &'a Renderer,
+    world: &'a World,
+    /// The shader that shades the hits of [`ShadeCtx::trace`].
+    shader: &'a dyn Shader,
     caster: &'a mut dyn RayCaster,
     sampler: Sampler,
     subset: u32,
@@ -92,14 +95,26 @@ pub struct ShadeCtx<'a> {
 }
 
 impl<'a> ShadeCtx<'a> {
-    /// A context for one sample: `subset` is its light subset (interleaved sampling).
-    pub fn new(renderer: &'a Renderer, caster: &'a mut dyn RayCaster, sampler: Sampler, subset: u32) -> Self {
-        ShadeCtx { renderer, caster, sampler, subset, depth: 0, rays: 0 }
+    /// A context for one sample in `world`, whose further hits `shader` shades: `subset` is
+    /// its light subset (interleaved sampling).
+    pub fn new(
+        world: &'a World,
+        shader: &'a dyn Shader,
+        caster: &'a mut dyn RayCaster,
+        sampler: Sampler,
+        subset: u32,
+    ) -> Self {
+        ShadeCtx { world, shader, caster, sampler, subset, depth: 0, rays: 0 }
     }
 
-    /// The renderer (settings, environment).
-    pub fn renderer(&self) -> &'a Renderer {
-        self.renderer
+    /// The world (settings, environment, scale).
+    pub fn world(&self) -> &'a World {
+        self.world
+    }
+
+    /// The settings (the world's).
+    pub fn settings(&self) -> &'a RenderSettings {
+        &self.world.settings
     }
 
     /// The scene the rays are traced in.
@@ -129,36 +144,36 @@ impl<'a> ShadeCtx<'a> {
         self.depth
     }
 
-    /// The radiance arriving along `ray`: its closest hit shaded by the renderer's shader, or
+    /// The radiance arriving along `ray`: its closest hit shaded by the sample's shader, or
     /// the environment where it misses. Beyond `max_depth` nested calls it returns black.
     pub fn trace(&mut self, ray: &Ray) -> Result<Vec3, Suspended> {
-        if self.depth >= self.renderer.settings.max_depth {
+        if self.depth >= self.world.settings.max_depth {
             return Ok(Vec3::ZERO);
         }
         let Some(hit) = self.intersect(ray)? else { return Ok(self.background(ray.dir)) };
         let sh = SurfaceHit::new(self.scene(), ray, hit);
-        let renderer = self.renderer;
+        let shader = self.shader;
         self.depth += 1;
-        let c = renderer.shader().shade(ray, &sh, self);
+        let c = shader.shade(ray, &sh, self);
         self.depth -= 1;
         c
     }
 
     /// What a ray leaving in direction `dir` sees when it hits nothing.
     pub fn background(&self, dir: Vec3) -> Vec3 {
-        self.renderer.background(dir)
+        self.world.background(dir)
     }
 
     /// The surface's material (reads its attributes now).
     pub fn material(&self, hit: &SurfaceHit) -> Material {
-        material_at(self.scene(), &hit.hit, self.renderer.textures())
+        material_at(self.scene(), &hit.hit, self.world.textures())
     }
 
     /// A ray from `hit` in direction `dir`, its origin moved off the surface to the side
-    /// `dir` leaves on (by the renderer's epsilon).
+    /// `dir` leaves on (by the world's epsilon).
     pub fn spawn(&self, hit: &SurfaceHit, dir: Vec3) -> Ray {
         let side = if dir.dot(hit.ng) >= 0.0 { hit.ng } else { -hit.ng };
-        Ray { org: hit.p + side * self.renderer.eps(), dir, t_min: 0.0, t_max: f32::INFINITY }
+        Ray { org: hit.p + side * self.world.eps(), dir, t_min: 0.0, t_max: f32::INFINITY }
     }
 
     /// The next random number of this sample, in `[0, 1)`.
@@ -172,29 +187,29 @@ impl<'a> ShadeCtx<'a> {
     }
 
     /// Irradiance that reaches every point regardless of shadows: `pi * ambient` when the
-    /// renderer lights with its single directional light, 0 under an environment.
+    /// world lights with its single directional light, 0 under an environment.
     pub fn ambient(&self) -> f32 {
-        if self.renderer.has_environment() {
+        if self.world.has_environment() {
             0.0
         } else {
-            std::f32::consts::PI * self.renderer.settings.ambient
+            std::f32::consts::PI * self.world.settings.ambient
         }
     }
 
-    /// Direct light at `hit` from the renderer's lights, with shadows:
+    /// Direct light at `hit` from the world's lights, with shadows:
     /// `sum over chosen lights of weight * brdf(light dir) * cos * visible`, an unbiased
     /// estimate of the reflected radiance for the BRDF `brdf` (1/sr; `albedo / pi` for a
     /// Lambertian surface).
     ///
-    /// The lights are the environment's virtual lights when the renderer has one (see
+    /// The lights are the environment's virtual lights when the world has one (see
     /// [`ShadeCtx::env_direct`]), else the single directional light `settings.light` with
     /// irradiance `pi * (1 - ambient)` (so that a white surface facing it shows
     /// `1 - ambient`, plus the ambient term).
     pub fn direct(&mut self, hit: &SurfaceHit, brdf: impl Fn(Vec3) -> Vec3) -> Result<Vec3, Suspended> {
-        if self.renderer.has_environment() {
+        if self.world.has_environment() {
             return self.env_direct(hit, brdf);
         }
-        let s = &self.renderer.settings;
+        let s = &self.world.settings;
         let light =
             DirLight { dir: s.light.normalize(), weight: Vec3::splat(std::f32::consts::PI * (1.0 - s.ambient)) };
         self.light_contribution(hit, &light, 1.0, &brdf)
@@ -206,14 +221,14 @@ impl<'a> ShadeCtx<'a> {
     /// sampling (each weighted by subset size / light_samples), or every light of the subset
     /// when `light_samples` is 0 or at least the subset's size.
     pub fn env_direct(&mut self, hit: &SurfaceHit, brdf: impl Fn(Vec3) -> Vec3) -> Result<Vec3, Suspended> {
-        let lights = &self.renderer.environment().lights;
+        let lights = &self.world.environment().lights;
         let m = lights.subsets() as f32;
         let subset = lights.subset(self.subset);
         let n = subset.len();
         if n == 0 {
             return Ok(Vec3::ZERO);
         }
-        let k = self.renderer.settings.light_samples as usize;
+        let k = self.world.settings.light_samples as usize;
         let mut sum = Vec3::ZERO;
         if k == 0 || k >= n {
             for l in subset {

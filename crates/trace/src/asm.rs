@@ -25,7 +25,14 @@
 //! What the kernel does not do it hands to the Rust driver, as the Rust kernels do: an edge
 //! exactly on the ray ([`Event::Exact`]) and a full stack ([`Event::Full`]).
 
-use super::*;
+use megaray_base::Ray;
+use megaray_scene::format::Node8;
+
+use crate::boxes::{FAR_EPS, TINY, W};
+use crate::driver::Scratch;
+use crate::tracer::{Entry, Tracer, STACK, TOP};
+use crate::tri::{AXES_BYTES, DOMINANT, PERMUTE};
+use crate::walk::{Event, Found, Walk};
 
 /// What the assembly kernel reads besides the ray (where to walk) and writes (its
 /// outcome). Offsets are given to the assembly as constants (`global_asm!` below), so the two
@@ -110,7 +117,7 @@ extern "sysv64" {
     fn megaray_walk_any(walk: *mut AsmRay, ray: *const Ray) -> u32;
 }
 
-/// Whether this CPU runs the assembly kernel: AVX2 and FMA (as [`packet::Isa::Avx2`]) and
+/// Whether this CPU runs the assembly kernel: AVX2 and FMA (as [`Isa::Avx2`]) and
 /// the bit instructions it uses (`tzcnt`, `blsr`, `andn`: BMI1; `bzhi`: BMI2).
 pub(crate) fn supported() -> bool {
     std::arch::is_x86_feature_detected!("avx2")

@@ -6,103 +6,21 @@
 //!
 //! The kernel is written once, as plain loops over the 16 lanes ([`traverse`]), and compiled
 //! three times: for AVX-512, for AVX2 and for the baseline (SSE2 on x86-64), which the compiler
-//! vectorizes to its widest registers. [`Isa::detect`] picks one at run time, once; the tests
+//! vectorizes to its widest registers. The tracer's [`Kernels`](crate::Kernels) choose one; the tests
 //! check every path the machine supports against single-ray traversal.
 
-use std::sync::OnceLock;
-
-use crate::{corners, fmax, fmin, Block, Entry, Found, Hit, RayTri4, Step, Tracer, BOX_EPS, W};
 use megaray_base::{Rays16, TriHit, WatertightRay};
 use megaray_scene::format::Node8;
 
+use crate::boxes::{fmax, fmin, BOX_EPS, W};
+use crate::isa::Isa;
+use crate::tracer::{Entry, Step, Tracer, TOP};
+use crate::tri::{corners, Block, RayTri4};
+use crate::walk::Found;
+use crate::Hit;
+
 /// Rays in a packet.
 pub const WIDTH: usize = 16;
-
-/// The instruction sets the packet kernel is compiled for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Isa {
-    /// Whatever the target guarantees (SSE2 on x86-64).
-    Baseline,
-    Avx2,
-    Avx512,
-}
-
-/// The environment variable that chooses the kernels' instruction set ([`Isa::from_env`]).
-pub const ISA_VAR: &str = "MEGARAY_ISA";
-
-/// What the AVX-512 kernels need: the foundation, 256-bit forms with 32 registers (VL), and
-/// AVX2 and FMA beside them.
-#[cfg(target_arch = "x86_64")]
-fn avx512() -> bool {
-    std::arch::is_x86_feature_detected!("avx512f")
-        && std::arch::is_x86_feature_detected!("avx512vl")
-        && std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("fma")
-}
-
-impl Isa {
-    /// The instruction set the kernels run on: the best this machine has, or the one the
-    /// environment variable [`ISA_VAR`] names if this machine has it (decided once, then
-    /// cached; see [`Isa::from_env`]).
-    pub fn detect() -> Isa {
-        static ISA: OnceLock<Isa> = OnceLock::new();
-        *ISA.get_or_init(|| match Isa::from_env() {
-            Ok(Some(isa)) => isa,
-            _ => Isa::best(),
-        })
-    }
-
-    /// The instruction set the environment variable [`ISA_VAR`] asks for (`avx512`, `avx2`
-    /// or `baseline`, as Embree's `isa=` setting chooses its own): `None` when unset or empty,
-    /// an error naming the value when it is unknown or not available on this machine.
-    /// (Front ends check it at start; [`Isa::detect`] ignores a bad value.)
-    pub fn from_env() -> Result<Option<Isa>, String> {
-        match std::env::var_os(ISA_VAR) {
-            Some(v) if !v.is_empty() => {
-                Isa::parse(&v.to_string_lossy()).map(Some).map_err(|e| format!("{ISA_VAR}: {e}"))
-            }
-            _ => Ok(None),
-        }
-    }
-
-    /// The instruction set named `s` (`avx512`, `avx2` or `baseline`; `sse2` and `scalar`
-    /// name the baseline too), if this machine can run it; else why not, in one line.
-    pub fn parse(s: &str) -> Result<Isa, String> {
-        let isa = match s.trim().to_ascii_lowercase().as_str() {
-            "avx512" | "avx-512" => Isa::Avx512,
-            "avx2" => Isa::Avx2,
-            "baseline" | "sse2" | "scalar" => Isa::Baseline,
-            _ => return Err(format!("unknown instruction set {s:?} (use avx512, avx2 or baseline)")),
-        };
-        match Isa::available().contains(&isa) {
-            true => Ok(isa),
-            false => Err(format!("this machine cannot run {isa:?} (it has {:?})", Isa::available())),
-        }
-    }
-
-    /// The best instruction set this machine has (the last of [`Isa::available`]).
-    fn best() -> Isa {
-        *Isa::available().last().expect("the baseline is always available")
-    }
-
-    /// Every instruction set this machine can run (the tests compare them all); detected once.
-    pub fn available() -> &'static [Isa] {
-        static AVAILABLE: OnceLock<Vec<Isa>> = OnceLock::new();
-        AVAILABLE.get_or_init(|| {
-            let mut v = vec![Isa::Baseline];
-            #[cfg(target_arch = "x86_64")]
-            {
-                if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                    v.push(Isa::Avx2);
-                }
-                if avx512() {
-                    v.push(Isa::Avx512);
-                }
-            }
-            v
-        })
-    }
-}
 
 /// The packet's rays, structure of arrays.
 struct Packet {
@@ -515,7 +433,7 @@ fn traverse<const ISA: u8>(tracer: &Tracer, rays: &Rays16, hits: &mut [Option<Hi
     let frustum = Frustum::new(&p);
     stack.clear();
     stack.push((tracer.root, (1u32 << n) - 1, [f32::NEG_INFINITY; WIDTH]));
-    let mut c = crate::TOP;
+    let mut c = TOP;
     while let Some((e, rays_in, dist)) = stack.pop() {
         // Skip the rays that have found something nearer since, and the entry if all have.
         let t_far = p.t_max.map(|t| t * BOX_EPS);

@@ -6,64 +6,8 @@ use megaray_base::{Ray, Vec3};
 use megaray_trace::Suspended;
 
 use crate::material::Material;
+use crate::settings::Builtin;
 use crate::shader::{ShadeCtx, Shader, SurfaceHit};
-
-/// The built-in shaders. A closed set: one `match` per hit.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Builtin {
-    /// The shading normal as a colour, `n * 0.5 + 0.5`.
-    Normal,
-    /// Lambertian under the lights, with shadows (plus the ambient term under the single
-    /// directional light). The default, and what `render` always did.
-    #[default]
-    Diffuse,
-    /// Lambertian plus Blinn-Phong highlights (material `Ks`, `Ns`; 0.3 and 32 when absent).
-    Phong,
-    /// A perfect mirror (reflectance 0.9), recursive up to the depth limit.
-    Mirror,
-    /// Clear glass of index 1.5: Fresnel (Schlick) reflection or refraction, one of the two
-    /// chosen at random in proportion, recursive up to the depth limit.
-    Glass,
-    /// Ambient occlusion: albedo times the fraction of `light_samples` cosine-distributed
-    /// rays that travel `ao_radius` (a fraction of the scene diagonal) unblocked.
-    Ao,
-    /// Lambertian under the environment light (the `--env` map, or the constant sky colour),
-    /// with shadows, by interleaved sampling of its virtual lights.
-    Env,
-    /// By material: opacity below 1 is glass, metallic at least 0.5 is a mirror tinted by the
-    /// base colour, a specular colour with a shininess is Phong, anything else diffuse (under
-    /// the environment when there is one).
-    Auto,
-}
-
-impl Builtin {
-    /// Every built-in, with its name.
-    pub const ALL: [(&'static str, Builtin); 8] = [
-        ("normal", Builtin::Normal),
-        ("diffuse", Builtin::Diffuse),
-        ("phong", Builtin::Phong),
-        ("mirror", Builtin::Mirror),
-        ("glass", Builtin::Glass),
-        ("ao", Builtin::Ao),
-        ("env", Builtin::Env),
-        ("auto", Builtin::Auto),
-    ];
-
-    /// The name `--shader` takes.
-    pub fn name(self) -> &'static str {
-        Builtin::ALL.iter().find(|(_, b)| *b == self).map(|(n, _)| *n).unwrap_or("?")
-    }
-}
-
-impl std::str::FromStr for Builtin {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Builtin, String> {
-        Builtin::ALL.iter().find(|(n, _)| *n == s).map(|(_, b)| *b).ok_or_else(|| {
-            let names: Vec<&str> = Builtin::ALL.iter().map(|(n, _)| *n).collect();
-            format!("unknown shader `{s}` (known: {})", names.join(", "))
-        })
-    }
-}
 
 impl Shader for Builtin {
     fn shade(&self, ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
@@ -172,8 +116,8 @@ pub fn cosine_dir(n: Vec3, u1: f32, u2: f32) -> Vec3 {
 
 /// Ambient occlusion.
 pub fn ao(hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
-    let k = ctx.renderer().settings.light_samples.max(1);
-    let radius = ctx.renderer().settings.ao_radius * ctx.renderer().diagonal();
+    let k = ctx.settings().light_samples.max(1);
+    let radius = ctx.settings().ao_radius * ctx.world().diagonal();
     let mut open = 0;
     for _ in 0..k {
         let (u1, u2) = ctx.next_2d();

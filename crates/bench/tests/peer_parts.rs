@@ -1,12 +1,11 @@
-//! `gen grid:1000` and `gen sphereflake:4` give the Embree peer harness's triangles: the same
-//! count, and the same hit count and sum of hit distances for the benchmark camera's primary
-//! rays (the peer's figures, from shared/peers/embree/results, are stored here).
+//! `gen grid:1000` and `gen sphereflake:4` built out of core into many parts give the Embree
+//! peer harness's triangles: the same count, and the same hit count and sum of hit distances
+//! for the benchmark camera's primary rays (the peer's figures, from
+//! shared/peers/embree/results, are stored here).
 
-mod common;
-
-use common::*;
-use megaray_render::{Camera, DEFAULT_OFFSET};
+use megaray_base::{Camera, DEFAULT_OFFSET};
 use megaray_scene::Scene;
+use megaray_testkit::*;
 use megaray_trace::Tracer;
 use rayon::prelude::*;
 

@@ -4,22 +4,20 @@
 //! process. (Its own test binary: RSS is per process, and other tests would map scenes of
 //! their own.)
 
-mod common;
-
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
 use std::process::{Command, Stdio};
 
-use common::*;
-use megaray_base::process_memory;
+use megaray_base::{process_memory, Camera, Ray, Vec3};
 use megaray_page::{Pager, PagerOptions};
-use megaray_render::{render_frame, Camera, RenderSettings, Renderer};
 use megaray_scene::Scene;
-use megaray_trace::Tracer;
+use megaray_testkit::*;
+use megaray_trace::jobs::{self, JobOptions};
+use megaray_trace::{RayCaster, Tracer};
 
-/// What a budgeted render may add to the process on top of its budget and of what the process
-/// held before it started: the tile table, frame buffers, thread stacks and code pages first
-/// touched (docs/ARCHITECTURE.md, Paging: "Memory bound").
+/// What budgeted frames may add to the process on top of the budget and of what the process
+/// held before they started: the tile table, the jobs' buffers, thread stacks and code pages
+/// first touched (docs/ARCHITECTURE.md, Paging: "Memory bound").
 const OVERHEAD: u64 = 12 << 20;
 
 /// Resets this process's peak resident set (`VmHWM`) to its current size (Linux 4.0+).
@@ -41,8 +39,8 @@ fn read_through_a_huge_page_map(path: &Path) {
     assert!(scene.check_all_tiles());
 }
 
-/// Renders 8 frames of orbiting views with `budget` and returns the peak RSS above the RSS
-/// before the pager started.
+/// Traces 8 frames of orbiting views (primary and shadow rays) with `budget` and returns the
+/// peak RSS above the RSS before the pager started.
 fn budgeted_peak(path: &Path, budget: u64) -> (u64, megaray_page::PagerStats) {
     let base = rss();
     reset_peak();
@@ -52,10 +50,19 @@ fn budgeted_peak(path: &Path, budget: u64) -> (u64, megaray_page::PagerStats) {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
     for k in 0..8 {
         let a = k as f32 * 0.9;
-        let cam = Camera::framing(&b, megaray_base::Vec3::new(a.sin() * 0.7, 0.35, a.cos() * 0.7), 128, 96);
-        let r = Renderer::new(RenderSettings::new(cam), &b);
-        let f = pool.install(|| render_frame(&r, &tracer, 0));
-        assert_eq!(f.jobs.unfinished, 0);
+        let cam = Camera::framing(&b, Vec3::new(a.sin() * 0.7, 0.35, a.cos() * 0.7), 128, 96);
+        let eps = 1e-4 * b.diagonal();
+        let n = (cam.width * cam.height) as usize;
+        // Each pixel: its primary hit, and a shadow ray from it.
+        let r = pool.install(|| {
+            jobs::run(&tracer, n, &JobOptions::default(), |i, c| {
+                let ray = cam.ray((i as u32 % cam.width) as f32 + 0.5, (i as u32 / cam.width) as f32 + 0.5);
+                let Some(h) = c.intersect(&ray)? else { return Ok(false) };
+                let p = ray.org + ray.dir * h.t;
+                c.occluded(&Ray::new(p - ray.dir * eps, Vec3::new(0.5, 1.0, 0.8).normalize()))
+            })
+        });
+        assert_eq!(r.stats.unfinished, 0);
     }
     let st = pager.stats();
     assert!(st.bytes_loaded > 2 * budget, "the frames did not page much: {st:?}");

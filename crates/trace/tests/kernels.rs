@@ -1,11 +1,11 @@
-//! Closest hits through the scene file equal brute-force ray-triangle tests.
+//! The kernels: closest and any hits through the scene file equal brute-force ray-triangle
+//! tests, and every kernel (instruction set, octant or generic, assembly, packets, with and
+//! without tile bookkeeping) gives the same hits, bit for bit.
 
-mod common;
-
-use common::*;
-use megaray_base::{intersect_triangle, Ray, Vec3};
+use megaray_base::{intersect_triangle, Camera, Ray, Vec3, CLOSE_OFFSET, DEFAULT_OFFSET};
 use megaray_scene::Scene;
-use megaray_trace::{Hit, Tracer};
+use megaray_testkit::*;
+use megaray_trace::{Hit, Isa, Kernels, Tracer};
 use rayon::prelude::*;
 
 /// Every triangle of the scene, read back from its tiles.
@@ -41,7 +41,7 @@ fn check(scene_path: &std::path::Path, expect_tris: u64) {
     let tris = all_tris(&scene);
     assert_eq!(tris.len() as u64, expect_tris);
     // Reading the triangles checked every tile: first the kernel that checks them anyway.
-    let tracer = Tracer::new(&scene).with_tile_checks();
+    let tracer = Tracer::with_kernels(&scene, Kernels { tile_checks: true, ..Kernels::best() });
     let b = scene.header().bounds;
     let (lo, ext) = (b.lo(), b.extent());
     let mut rng = Rng(7);
@@ -156,7 +156,6 @@ fn rays_from_inside_closed_spheres_always_hit() {
 /// kernel's distances: for coherent camera packets and for packets of random rays.
 #[test]
 fn packet_kernels_equal_single_rays() {
-    use megaray_trace::packet::Isa;
     let dir = tempfile::tempdir().unwrap();
     let ply = gen(dir.path(), "plant:40k");
     let (scene_path, _) = build(dir.path(), &[model("stanford-bunny.obj"), ply], "mixed", Some(15_000));
@@ -164,8 +163,8 @@ fn packet_kernels_equal_single_rays() {
     let tracer = Tracer::new(&scene);
     let b = scene.header().bounds;
     let mut packets: Vec<Vec<Ray>> = Vec::new();
-    for off in [megaray_render::DEFAULT_OFFSET, megaray_render::CLOSE_OFFSET, Vec3::new(0.3, -0.2, 0.25)] {
-        let cam = megaray_render::Camera::framing(&b, off, 128, 128);
+    for off in [DEFAULT_OFFSET, CLOSE_OFFSET, Vec3::new(0.3, -0.2, 0.25)] {
+        let cam = Camera::framing(&b, off, 128, 128);
         for py in (0..128).step_by(4) {
             for px in (0..128).step_by(4) {
                 let p: Vec<Ray> =
@@ -202,23 +201,24 @@ fn packet_kernels_equal_single_rays() {
     };
     let mut compared = 0;
     for &isa in isas {
+        let packed = Tracer::with_kernels(&scene, Kernels { isa, ..Kernels::best() });
         for p in &packets {
             let mut hits = vec![None; p.len()];
-            tracer.intersect_packet_with(p, &mut hits, isa);
+            packed.intersect_packet(p, &mut hits);
             for (r, h) in p.iter().zip(&hits) {
                 same(*h, tracer.intersect(r), &|| format!("{isa:?}: ray {r:?}"));
                 compared += 1;
             }
         }
         // Camera packets made in structure of arrays, as the bench traces them.
-        let cam = megaray_render::Camera::framing(&b, megaray_render::CLOSE_OFFSET, 128, 128);
+        let cam = Camera::framing(&b, CLOSE_OFFSET, 128, 128);
         for py in (0..128).step_by(4) {
             for px in (0..128).step_by(4) {
                 let sx: [f32; 16] = std::array::from_fn(|i| (px + i % 4) as f32 + 0.5);
                 let sy: [f32; 16] = std::array::from_fn(|i| (py + i / 4) as f32 + 0.5);
                 let rays = cam.rays16(&sx, &sy);
                 let mut hits = [None; 16];
-                tracer.intersect16_with(&rays, &mut hits, isa);
+                packed.intersect16(&rays, &mut hits);
                 for (i, h) in hits.iter().enumerate() {
                     same(*h, tracer.intersect(&rays.ray(i)), &|| format!("{isa:?}: camera ray {i} of ({px}, {py})"));
                     compared += 1;
@@ -239,7 +239,6 @@ fn packet_kernels_equal_single_rays() {
 /// (which a tracer skips when every tile is checked).
 #[test]
 fn single_ray_kernels_agree_across_isas() {
-    use megaray_trace::packet::Isa;
     let dir = tempfile::tempdir().unwrap();
     let ply = gen(dir.path(), "sphereflake:2");
     let (scene_path, _) = build(dir.path(), &[model("stanford-bunny.obj"), ply], "mixed", Some(20_000));
@@ -252,7 +251,7 @@ fn single_ray_kernels_agree_across_isas() {
         let o = lo + ext * Vec3::new(rng.f32(), rng.f32(), rng.f32());
         rays.push(Ray::new(o, Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5)));
     }
-    let cam = megaray_render::Camera::framing(&b, megaray_render::CLOSE_OFFSET, 96, 96);
+    let cam = Camera::framing(&b, CLOSE_OFFSET, 96, 96);
     for py in 0..96 {
         for px in 0..96 {
             rays.push(cam.ray(px as f32 + 0.5, py as f32 + 0.5));
@@ -265,7 +264,7 @@ fn single_ray_kernels_agree_across_isas() {
         }
     }
     let key = |h: Option<megaray_trace::Hit>| h.map(|h| (h.t.to_bits(), h.u.to_bits(), h.v.to_bits(), h.part, h.prim));
-    let reference = Tracer::new(&scene).with_isa(Isa::Baseline).with_tile_checks();
+    let reference = Tracer::with_kernels(&scene, Kernels { isa: Isa::Baseline, tile_checks: true, ..Kernels::best() });
     // An any-hit query's hit (whichever it finds first: the same for every kernel, which
     // visit in the same order), as `try_occluded` makes it.
     let any_hit = |t: &Tracer, r: &Ray| match t.try_occluded(r) {
@@ -280,7 +279,8 @@ fn single_ray_kernels_agree_across_isas() {
     assert!(Tracer::new(&scene).skips_tile_checks());
     // The assembly kernel (where this machine runs it) as it runs, with its stack cut to
     // one and to three entries below a node's children, and not at all.
-    let asm_here = Isa::available().contains(&Isa::Avx2) && Tracer::new(&scene).with_isa(Isa::Avx2).runs_asm_kernel();
+    let asm_here = Isa::available().contains(&Isa::Avx2)
+        && Tracer::with_kernels(&scene, Kernels { isa: Isa::Avx2, ..Kernels::best() }).runs_asm_kernel();
     let asm_cases: &[Option<usize>] = if asm_here { &[None, Some(1), Some(3), Some(0)] } else { &[None] };
     let kernels = Isa::available().iter().flat_map(|&isa| [(isa, None), (isa, Some(true)), (isa, Some(false))]);
     let kernels = kernels.flat_map(|(isa, oct)| asm_cases.iter().map(move |&a| (isa, oct, a)));
@@ -288,16 +288,14 @@ fn single_ray_kernels_agree_across_isas() {
         if asm.is_some() && (isa != Isa::Avx2 || octants != Some(false) || checks) {
             continue;
         }
-        let tracer = match octants {
-            None => Tracer::new(&scene).with_isa(isa),
-            Some(always) => Tracer::new(&scene).with_isa(isa).with_octant_kernels(always),
+        let k = Kernels {
+            isa,
+            octants,
+            tile_checks: checks,
+            asm: asm != Some(0),
+            asm_stack: asm.filter(|&n| n > 0).unwrap_or(Kernels::best().asm_stack),
         };
-        let tracer = match asm {
-            None => tracer,
-            Some(0) => tracer.with_asm_kernel(false),
-            Some(n) => tracer.with_asm_stack(n),
-        };
-        let tracer = if checks { tracer.with_tile_checks() } else { tracer };
+        let tracer = Tracer::with_kernels(&scene, k);
         assert_eq!(tracer.skips_tile_checks(), !checks);
         assert_eq!(tracer.runs_asm_kernel(), asm_here && isa == Isa::Avx2 && !checks && asm != Some(0));
         let isa = format!("{isa:?} (octant kernels {octants:?}, tile checks {checks}, assembly kernel {asm:?})");

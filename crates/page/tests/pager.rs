@@ -1,0 +1,106 @@
+//! The pager alone, without a tracer: budgets, loads and evictions, what a loaded tile holds,
+//! damaged tiles and files.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use megaray_page::{Access, Pager, PagerOptions};
+use megaray_scene::Scene;
+use megaray_testkit::*;
+
+/// A generated plant of many small tiles, built into `dir/paged.mray`.
+fn scene_file(dir: &Path) -> PathBuf {
+    let ply = gen(dir, "plant:60k");
+    let (path, s) = build(dir, &[ply], "paged", Some(20_000));
+    assert!(s.tiles >= 20, "only {} tiles", s.tiles);
+    path
+}
+
+/// Asks for tile `t` and waits until it has settled (loaded or failed).
+fn fetch(pager: &Pager, t: u32) -> Access {
+    loop {
+        let seen = pager.arrivals();
+        let a = {
+            let _pin = pager.pin();
+            pager.acquire(t)
+        };
+        if a != Access::Missing {
+            return a;
+        }
+        pager.wait_arrival(seen, Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn a_budget_too_small_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = scene_file(dir.path());
+    let err = Pager::open(&path, PagerOptions { budget: 4096, fetchers: 1 }).err().unwrap().to_string();
+    assert!(err.contains("paged.mray") && err.contains("too small") && err.contains("at least"), "{err}");
+    // A mapped scene is not for a pager: it would page behind the pager's back.
+    let mapped = Arc::new(Scene::open(&path).unwrap());
+    let err = Pager::new(mapped, PagerOptions { budget: 1 << 30, fetchers: 1 }).err().unwrap().to_string();
+    assert!(err.contains("paged.mray") && err.contains("open_owned"), "{err}");
+}
+
+/// Every tile in turn under a budget of a few: each arrives holding the file's bytes (its
+/// check passes under a pin), resident bytes never pass the budget, and tiles are evicted to
+/// make room; a tile evicted reads as zeros until it is loaded again.
+#[test]
+fn every_tile_loads_within_a_budget_of_a_few() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = scene_file(dir.path());
+    let budget = Pager::min_budget(&Scene::open(&path).unwrap()) + (32 << 10);
+    let pager = Pager::open(&path, PagerOptions { budget, fetchers: 2 }).unwrap();
+    let scene = pager.scene().clone();
+    let n = scene.tiles().len() as u32;
+    for round in 0..2 {
+        for t in 0..n {
+            assert_eq!(fetch(&pager, t), Access::Ready, "round {round}: tile {t}");
+            let _pin = pager.pin();
+            if pager.acquire(t) == Access::Ready {
+                scene.check_tile(t).unwrap_or_else(|e| panic!("round {round}: tile {t} as loaded: {e}"));
+            }
+            let st = pager.stats();
+            assert!(st.resident <= st.tile_budget, "round {round}: {st:?}");
+        }
+    }
+    let st = pager.stats();
+    assert!(st.loaded >= 2 * n as u64 - 4 && st.evicted > n as u64, "{st:?}");
+    assert!(st.peak_resident <= st.tile_budget);
+    assert!(pager.first_error().is_none());
+    let gone = (0..n).find(|&t| !pager.is_resident(t)).expect("a tile was evicted");
+    let e = scene.tiles()[gone as usize];
+    assert!(scene.bytes()[e.offset as usize..][..e.bytes as usize].iter().all(|&b| b == 0));
+    let m = st.process.expect("process memory on Linux");
+    assert!(m.file < 64 << 20, "the scene is not mapped: {m:?}");
+}
+
+/// A damaged tile is found on load: it is never available, the fault names file and tile,
+/// and it is not asked for again. A file truncated while open: the load fails with an error
+/// naming the tile, not a SIGBUS.
+#[test]
+fn damaged_and_truncated_files_are_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = scene_file(dir.path());
+    let probe = Scene::open(&path).unwrap();
+    let t = probe.tiles().len() as u32 / 2;
+    let off = probe.tiles()[t as usize].offset + 200;
+    let last = probe.tiles().len() as u32 - 1;
+    let last_off = probe.tiles()[last as usize].offset;
+    drop(probe);
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[off as usize] ^= 0x40;
+    std::fs::write(&path, &bytes).unwrap();
+    let pager = Pager::open(&path, PagerOptions { budget: 1 << 30, fetchers: 2 }).unwrap();
+    assert_eq!(fetch(&pager, t), Access::Corrupt);
+    let err = pager.first_error().expect("the damaged tile is reported").to_string();
+    assert!(err.contains("paged.mray") && err.contains(&format!("tile {t}")) && err.contains("checksum"), "{err}");
+    assert_eq!(pager.stats().corrupt, 1);
+    assert!(!pager.is_resident(t));
+    // Truncated under the open scene, before its last tile.
+    std::fs::OpenOptions::new().write(true).open(&path).unwrap().set_len(last_off).unwrap();
+    assert_eq!(fetch(&pager, last), Access::Corrupt);
+    assert_eq!(pager.stats().corrupt, 2);
+}

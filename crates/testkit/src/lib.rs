@@ -1,0 +1,58 @@
+//! # megaray-testkit: helpers for the megaray crates' tests (a dev-dependency only)
+//!
+//! The real test models (`shared/models` beside the repository), generated models, scenes
+//! built from them into temporary folders, and a small deterministic random number generator.
+
+use std::path::{Path, PathBuf};
+
+use megaray_base::NoProgress;
+use megaray_build::{build_scene, BuildOptions, BuildSummary};
+
+/// The folder of real test models (`shared/models` beside the repository).
+pub fn models_dir() -> PathBuf {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/models");
+    assert!(d.is_dir(), "test models not found at {} (shared/ must sit beside the repository)", d.display());
+    d
+}
+
+pub fn model(name: &str) -> PathBuf {
+    models_dir().join(name)
+}
+
+/// Generates `spec` as PLY into `dir`.
+pub fn gen(dir: &Path, spec: &str) -> PathBuf {
+    let s: megaray_gen::GenSpec = spec.parse().unwrap();
+    let p = dir.join(format!("{}.ply", spec.replace(':', "_")));
+    megaray_gen::write_ply(&s, &p, &NoProgress).unwrap();
+    p
+}
+
+/// Builds `inputs` into `dir/name.mray`, with at most `max_part` triangles a part and
+/// tiles of about 64 KiB (many tiles, so that links and paging are exercised).
+pub fn build(dir: &Path, inputs: &[PathBuf], name: &str, max_part: Option<u64>) -> (PathBuf, BuildSummary) {
+    let out = dir.join(format!("{name}.mray"));
+    let opts = BuildOptions {
+        max_part_tris: max_part,
+        build_mem: 512 << 20,
+        tile_target: 64 << 10,
+        threads: 2,
+        ..BuildOptions::default()
+    };
+    let s = build_scene(inputs, &out, &opts, &NoProgress).unwrap();
+    (out, s)
+}
+
+/// A small deterministic random number generator (splitmix64).
+pub struct Rng(pub u64);
+impl Rng {
+    pub fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    pub fn f32(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
