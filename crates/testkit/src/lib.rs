@@ -45,7 +45,7 @@ pub fn build(dir: &Path, inputs: &[PathBuf], name: &str, max_part: Option<u64>) 
 /// A small deterministic random number generator (splitmix64).
 pub struct Rng(pub u64);
 impl Rng {
-    pub fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
@@ -53,6 +53,6 @@ impl Rng {
         z ^ (z >> 31)
     }
     pub fn f32(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 }

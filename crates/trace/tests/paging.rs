@@ -106,7 +106,7 @@ fn stress_many_threads_tiny_budget_many_frames() {
                 let mut rng = Rng(k + 7);
                 let n = scene.tiles().len() as u64;
                 while !stop.load(std::sync::atomic::Ordering::Relaxed) {
-                    let t = (rng.next() % n) as u32;
+                    let t = (rng.next_u64() % n) as u32;
                     if !pager.is_resident(t) {
                         // (Asking would flood the fetchers with tiles nobody traces.)
                         std::thread::yield_now();
