@@ -6,7 +6,9 @@
 //! - [`Ray`] and [`intersect_triangle`]: the scalar, watertight ray-triangle test
 //!   (Woop, Benthin and Wald 2013) that is the reference every faster kernel is tested against;
 //! - [`Progress`]: how long-running library code reports progress without knowing about terminals;
-//! - [`parse_size`]: `64K`, `1G`, `1.5GiB` style sizes, for memory budgets on the command line.
+//! - [`parse_size`]: `64K`, `1G`, `1.5GiB` style sizes, for memory budgets on the command line;
+//! - [`process_memory`]: the process's resident memory as the kernel counts it (file-backed,
+//!   anonymous, peak), which the pager's statistics report beside its own count.
 //!
 //! ```
 //! use megaray_base::{Ray, intersect_triangle, Vec3};

@@ -51,9 +51,9 @@ use crate::stream::{StreamFile, StreamReader, StreamTri};
 
 /// The most triangles a leaf holds: two blocks of four, when the SAH finds that cheaper than
 /// a split (a traversal step and the blocks of both sides, weighted by area). Such leaves
-/// make fewer, fuller nodes (grid:1000: 147K inner nodes against 214K with one-block
-/// leaves, Embree's 149K), so less memory per ray; the single-ray kernel tests their two
-/// blocks in one 8-wide pass, so they cost little more than one.
+/// make fewer, fuller nodes, so smaller files and less memory per ray; the single-ray kernel
+/// tests their two blocks in one 8-wide pass, so they cost little more than one
+/// (docs/PERF.md, "Leaf size").
 pub const MAX_LEAF: usize = 8;
 
 /// Estimated peak bytes per triangle of an in-core part build (stream records, boxes, the

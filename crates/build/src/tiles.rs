@@ -156,7 +156,7 @@ pub fn tile_part(bvh: &Bvh, tris: &[[[f32; 3]; 3]], target: u64) -> Tiled {
                         // The triangles of the leaves that come next (they mostly follow in
                         // `order`) start loading now: they lie all over `tris` (in input
                         // order), and fetching them one miss at a time was most of this pass
-                        // (grid:1000: 100 ms of a 1.2 s build on 1 thread).
+                        // (docs/PERF.md, "Tile emission prefetch").
                         for &p in bvh.order.iter().skip(start as usize + PREFETCH_AHEAD).take(count as usize) {
                             megaray_base::prefetch(&tris[p as usize]);
                         }

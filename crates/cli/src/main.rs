@@ -98,8 +98,9 @@ enum Command {
     /// Comparing with the peer (its figures in ../shared/peers/embree/results):
     ///   megaray bench ../shared/models/stanford-bunny.obj --name stanford-bunny.obj --json > megaray.jsonl
     ///   python3 ../shared/bench/compare.py ../shared/peers/embree/results/*.jsonl -- megaray.jsonl
-    /// bench/run_suite.sh runs the whole standard suite and the comparison. Run both harnesses
-    /// within minutes of each other on an idle machine, and quote ratios, not absolute figures.
+    /// bench/vs_peer.sh runs the whole standard suite against the peer, the two harnesses in
+    /// turn row by row, seconds apart (--stored: megaray alone against the peer's stored
+    /// figures). Quote ratios, not absolute figures.
     #[command(verbatim_doc_comment)]
     Bench(bench::BenchArgs),
 }

@@ -25,8 +25,8 @@ pub struct PagingArgs {
     #[arg(long, value_name = "SIZE", value_parser = parse_mem)]
     pub mem: Option<u64>,
     /// Fetcher threads loading tiles (with --mem). Each waits on one tile read at a time;
-    /// more of them keep more reads in flight (on this project's test machine random tile
-    /// reads went from 250 MB/s with 1 to 750 MB/s with 8).
+    /// more of them keep more reads in flight, and random tile reads scale with the reads in
+    /// flight (docs/PERF.md, "Fetchers").
     #[arg(long, value_name = "N", default_value_t = 8)]
     pub fetchers: usize,
     /// Print paging statistics: tiles requested, loaded, evicted, bytes read, tile-table

@@ -288,8 +288,8 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
 }
 
 /// The frame loop when nothing can suspend (an unpaged tracer, no deadline): 32x32 tiles as
-/// rayon tasks, each pixel straight through the tracer, with no job bookkeeping (about a
-/// third faster on frames of cheap pixels).
+/// rayon tasks, each pixel straight through the tracer, with no job bookkeeping, which costs
+/// most on frames of cheap pixels (docs/PERF.md, "In-core frame loop").
 fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
     let aovs = r.settings.aovs;

@@ -3,6 +3,9 @@
 //! The render crate turns rays into pictures. Its parts, one concept a module:
 //!
 //! - [`Camera`] (from `megaray-base`, re-exported): pinhole camera, the benchmark framings.
+//! - [`RenderSettings`], [`Builtin`] (`settings.rs`): how to render, plain data; `World`
+//!   (`world.rs`): what a shader sees of the renderer. Imports run one way:
+//!   `frame` -> `shader` -> `world` -> `settings`.
 //! - [`Shader`], [`ShadeCtx`], [`SurfaceHit`] (`shader.rs`): the interface called at each
 //!   hit; shaders fire arbitrary rays through [`megaray_trace::RayCaster`] (closest hit, any
 //!   hit, or recursively shaded). [`Builtin`] (`shaders/`): `normal`, `diffuse`, `phong`,

@@ -597,7 +597,7 @@ impl Scene {
 
     /// Asks for the mapping to be backed by 2 MiB pages where the kernel can, for a scene
     /// read whole and traced in core: with 4 KiB pages nearly every node visit of a large
-    /// scene misses the TLB (a Zen 4's 3072 second-level entries cover 12 MiB). Linux maps a
+    /// scene misses the TLB (docs/PERF.md, "Huge pages"). Linux maps a
     /// file with 2 MiB pages where its page cache holds 2 MiB folios, which it makes when it
     /// reads the file into a mapping advised `HUGEPAGE` (madvise): pages read from now on
     /// (such as by [`Scene::check_all_tiles`]) come so; pages cached before stay as they
@@ -615,7 +615,7 @@ impl Scene {
     /// and dropped from the page cache (`fdatasync`, `posix_fadvise` DONTNEED; pages mapped
     /// already stay), so that the next reads through the map bring the whole file back in
     /// 2 MiB folios: for the benchmark, whose figures should not depend on how the file was
-    /// cached before (docs/PERF.md).
+    /// cached before (docs/PERF.md, "Huge pages").
     pub fn reread_in_huge_pages(&self) -> std::io::Result<()> {
         self.advise_huge_pages()?;
         #[cfg(target_os = "linux")]

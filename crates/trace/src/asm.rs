@@ -13,14 +13,11 @@
 //! test holds and reloads them after (ten broadcasts), the ray's constants are made in the
 //! kernel from the `Ray` itself (the operations of `RayBox::new` and
 //! `RayTri4::with_axis_avx`; a set-up in Rust that passed them in memory cost more than the
-//! kernel saved), and one kernel serves rays of every octant. callgrind (stanford-bunny@close diffuse_1): 788 instructions per ray against the
-//! compiled kernel's 970 (Embree's 833); `bench/ab.sh` on the AMD EPYC (Zen 1) VM: diffuse_1
-//! +4% (bunny@close, bunny, grid:1000@close), +6% (sphereflake:4@close), +1% (sphereflake:1,
-//! in cache): on that machine the instructions are not what limits these rays (their
-//! mispredicted branches and the latency of each node's test are), so a fifth fewer gave a
-//! twentieth more. Only new rays that would run the generic kernel come here (incoherent
-//! ones): coherent rays keep the octant kernels, which were 4-10% faster for them than this
-//! kernel with as many instructions per ray (not understood: not the hit records' loads).
+//! kernel saved), and one kernel serves rays of every octant. It runs about a fifth fewer
+//! instructions per ray than the compiled generic kernel and measured a few percent faster on
+//! incoherent rays (docs/PERF.md, "The assembly kernel"). Only new rays that would run the
+//! generic kernel come here (incoherent ones): coherent rays keep the octant kernels, which
+//! measured faster for them.
 //!
 //! What the kernel does not do it hands to the Rust driver, as the Rust kernels do: an edge
 //! exactly on the ray ([`Event::Exact`]) and a full stack ([`Event::Full`]).

@@ -149,8 +149,8 @@ impl RayBox {
     /// `t0` must be `+0.0` or above ([`t_start`]). The AVX test then reduces and compares
     /// the distances' bits as signed integers, as Embree does: one cycle each for `vpmaxsd`,
     /// `vpminsd` and `vpcmpgtd` where their float forms take four, on the traversal's
-    /// critical path (measured +10-15% rays per second, stanford-bunny@close, all three
-    /// kinds). Integer order is float order on floats whose sign bit is clear; any with it
+    /// critical path (docs/PERF.md, "Box test"). Integer order is float order on floats
+    /// whose sign bit is clear; any with it
     /// set is below them all, and so never the entry (`t0` is above it) and always the exit
     /// if present, an exit that fails the comparison with every entry. So it gives the float
     /// test's result but for one case: an exit of `-0.0` (an origin exactly on a far plane,

@@ -353,16 +353,15 @@ impl<'s> Tracer<'s> {
     ///
     /// On AVX2 there is one kernel per octant of ray directions, in which the rows of the
     /// near and far planes are constants (memory operands of the box test rather than six
-    /// offsets held in registers: 4% fewer instructions per ray), and one for any
-    /// direction, which reads the triangle test's rows by the ray's axes (held per ray, so
-    /// that nothing branches on them: diffuse rays, whose axis comes at random, mispredicted
-    /// a choice by it per block (+5-9% diffuse rays per second when it went), and then, with
-    /// a kernel per axis, the choice of kernel per ray). Eight kernels are
-    /// more code than the instruction cache holds at once, so the octant kernels run only for
-    /// coherent rays: when this thread's last [`STREAK_MIN`] new rays ran in the same octant
-    /// (camera and shadow rays; measured +10% on them), and the generic kernel otherwise
-    /// (diffuse bounces, whose octants come at random; measured +7% on them). All give the
-    /// same hits (tested).
+    /// offsets held in registers), and one for any direction, which reads the triangle
+    /// test's rows by the ray's axes (held per ray, so that nothing branches on them: diffuse
+    /// rays, whose axis comes at random, mispredicted a choice by it per block, and then,
+    /// with a kernel per axis, the choice of kernel per ray). Eight kernels are more code
+    /// than the instruction cache holds at once, so the octant kernels run only for coherent
+    /// rays: when this thread's last [`STREAK_MIN`] new rays ran in the same octant (camera
+    /// and shadow rays), and the generic kernel otherwise (diffuse bounces, whose octants
+    /// come at random). Each choice was measured: docs/PERF.md, "Octant and generic
+    /// kernels". All give the same hits (tested).
     #[inline(always)]
     pub(crate) fn walk_on<const AVX: bool, const ANY: bool>(&self, w: &mut Walk<'_>, ray: &Ray) -> Event {
         let kernel = if std::mem::replace(&mut w.fresh, false) {
@@ -392,9 +391,9 @@ impl<'s> Tracer<'s> {
         // kernel's set-up. But where rays come that enter the scene's box (a view filled
         // by the model, secondary rays), the test is 10-35 instructions that never cull,
         // and the root node's test would cull as well: after a ray that entered the box,
-        // the thread's next [`SKIP_BOUNDS`] new rays go without it (callgrind, AVX2 path,
-        // stanford-bunny primary_1: at the close camera 752 -> 718 instructions per ray,
-        // at the default one, most of whose rays miss the box, 261 -> 239).
+        // the thread's next [`SKIP_BOUNDS`] new rays go without it (docs/PERF.md,
+        // "Scene-box test"). In the driver, not the kernel, so that a miss never pays for
+        // a kernel's set-up.
         if streak.skip_bounds > 0 {
             streak.skip_bounds -= 1;
         } else if self.misses_bounds(ray) {
@@ -411,7 +410,7 @@ impl<'s> Tracer<'s> {
             Some(false) => GENERIC,
             None => {
                 // Without branches: diffuse rays' octants come at random, and a branch on
-                // `last == oct` mispredicted for 0.31 of them (callgrind).
+                // `last == oct` mispredicted for nearly a third of them.
                 let (last, n) = (streak.octant, streak.run);
                 let n = std::hint::select_unpredictable(last as usize == oct, n.saturating_add(1), 0);
                 (streak.octant, streak.run) = (oct as u8, n);
@@ -424,9 +423,8 @@ impl<'s> Tracer<'s> {
     /// table): [`Tracer::walk`] inlined with its [`Walk`] a local of this function, so that
     /// the walk's state (stack depth, closest hit, the entry to start from) is made, kept and
     /// read in registers, not written to memory for the kernel and read back by a driver
-    /// (callgrind, AVX2 path: 15-19 fewer instructions per ray, bunny@close primary_1 691 ->
-    /// 672 and diffuse_1 998 -> 983; `bench/ab.sh` +1-2% on each single-ray kind). The rare
-    /// events go on in [`Tracer::drive_rare`] with the walk kernels.
+    /// (docs/PERF.md, "New-ray kernels"). The rare events go on in [`Tracer::drive_rare`]
+    /// with the walk kernels.
     #[inline(always)]
     pub(crate) fn new_ray<const AVX: bool, const ANY: bool, const OCT: usize>(
         &self,

@@ -14,13 +14,12 @@
 //! Threads wait only when every job left is parked; that time is [`JobStats::wait_secs`].
 //! At most [`JobOptions::max_parked`] jobs are parked at once; past that, threads retire
 //! parked jobs before taking new ones. A small cap ([`MAX_PARKED`], the default) keeps a
-//! frame's accesses together: a frame that needs 3.4 times the memory budget re-read 1.1
-//! times its working set instead of 2.1 times with a cap of 65,536 (plant:300M, 1024x768,
-//! `--mem 2G`). Against a deadline a large cap is better: threads race ahead through the
-//! pixels whose tiles are resident (93 % of a path's pixels finished in 500 ms frames,
-//! against 47 % with 256). Either way memory is bounded (a parked job keeps a few hundred
-//! bytes). With a
-//! deadline, [`run`] returns when it passes and the jobs not finished are `None`.
+//! frame's accesses together, so that a frame larger than the memory budget re-reads little
+//! more than its working set. Against a deadline a large cap ([`MAX_PARKED_DEADLINE`]) is
+//! better: threads race ahead through the pixels whose tiles are resident, and more pixels
+//! finish in time (docs/PERF.md, "Parking cap and pixel order"). Either way memory is
+//! bounded (a parked job keeps a few hundred bytes). With a deadline, [`run`] returns when
+//! it passes and the jobs not finished are `None`.
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering::*};

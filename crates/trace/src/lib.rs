@@ -1,9 +1,10 @@
 //! # megaray-trace: rays through a scene file
 //!
-//! [`Tracer`] walks the two-level tree of a memory-mapped [`Scene`]: the top-level tree over
-//! parts, then each part's 8-wide BVH, crossing from tile to tile through links. Every tile is
-//! checked the first time it is entered (see [`Scene::tile`]); a corrupt tile is skipped and
-//! reported through [`Scene::first_error`], never read as garbage.
+//! [`Tracer`] walks the two-level tree of a [`Scene`] (mapped, or read in tile by tile by a
+//! pager): the top-level tree over parts, then each part's 8-wide BVH, crossing from tile to
+//! tile through links. Every tile is checked the first time it is entered (see
+//! [`Scene::tile`]); a corrupt tile is skipped and reported through [`Scene::first_error`],
+//! never read as garbage.
 //!
 //! - [`Tracer::intersect`]: the closest hit ([`Hit`]: distance, barycentrics, which triangle);
 //! - [`Tracer::occluded`]: any hit, for shadow rays (stops at the first).

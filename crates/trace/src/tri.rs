@@ -187,9 +187,8 @@ impl RayTri4 {
     /// by its axes' [`PERMUTE`]; one per splat), where the scalar form goes through the
     /// machine stack to index the ray's arrays. The same products, so the same constants
     /// (tested). With the dominant axis by one comparison of vectors and the rows as byte
-    /// offsets ([`row`]), the generic AVX-512 kernel's set-up went from 203 to 152
-    /// instructions (objdump), and callgrind (AVX2 path, stanford-bunny@close diffuse_1)
-    /// counts 1067 -> 1012 instructions per ray.
+    /// offsets ([`row`]), this keeps the generic kernel's per-ray set-up short
+    /// (docs/PERF.md, "Per-ray set-up").
     ///
     /// # Safety
     /// The CPU must have AVX (inlined into the AVX kernels, as [`RayTri4::test8_k`] is).

@@ -52,8 +52,8 @@ impl<'s> Tracer<'s> {
     ///
     /// It calls no function (all it uses is inlined, bounds checks aside, which never
     /// return): a call would clobber every vector register, and the compiler would then keep
-    /// the ray's constants on the machine stack and reload them at every node (measured: 1.9x
-    /// Embree's instructions per ray before this split). What is rare returns to the driver
+    /// the ray's constants on the machine stack and reload them at every node (docs/PERF.md,
+    /// "A hot loop that calls nothing"). What is rare returns to the driver
     /// as an [`Event`], the walk's state saved in `w`: a link into a tile that is paged or not
     /// checked yet, an edge exactly on the ray, a full or empty fixed stack, an any-hit.
     /// Entries popped from a tile other than the open one reopen it without a check on an
@@ -99,8 +99,8 @@ impl<'s> Tracer<'s> {
         let mut next = w.next.take();
         // One place pops, and it asks first whether an interrupted entry is pending. Both
         // ways of not asking (a pop at each dead end; the pending entry pushed before the
-        // loop) made any-hit rays ~10% slower on AVX-512 (bench/ab.sh, sphereflake:2): the
-        // compiler then copies the pop into every dead end, and those branches predict worse.
+        // loop) made any-hit rays slower: the compiler then copies the pop into every dead
+        // end, and those branches predict worse (docs/PERF.md, "One pop site").
         let event = 'walk: loop {
             let e = match next.take() {
                 Some(e) => e,
@@ -194,10 +194,7 @@ impl<'s> Tracer<'s> {
                 let node = self.walk_node_at(node);
                 // The node's last line (its child references, which the box test does not
                 // read) asked for with the boxes, not after the test has picked a child: a
-                // second miss in a row on a node not in cache. bench/ab.sh, 6-8 rounds on an
-                // Intel Xeon (2 MiB L2 per core): shadow +6-7% and diffuse +3-5% on
-                // sphereflake:4@close, grid:1000 and stanford-bunny@close (an earlier session
-                // had measured it neutral on an AMD Zen 4).
+                // second miss in a row on a node not in cache (docs/PERF.md, "Prefetching").
                 let refs = std::mem::offset_of!(Node8, child);
                 megaray_base::prefetch_addr((node as *const Node8 as *const u8).wrapping_add(refs));
                 let arr = c;
@@ -294,10 +291,8 @@ pub(crate) fn walk_avx2<const ANY: bool, const ALL: bool, const OCT: usize>(
 
 /// [`walk_avx2`] compiled for AVX-512: the same operations (256 bits wide), but 32 vector
 /// registers, so that the ray's constants stay in registers (with 16, four of them are kept
-/// on the machine stack and reloaded at every node), and comparisons into mask registers.
-/// bench/ab.sh against the AVX2 build on this project's Zen 4: stanford-bunny@close +8%
-/// (primary, shadow, diffuse), grid:1000@close diffuse +5%, memory-bound sphereflake:4
-/// unchanged.
+/// on the machine stack and reloaded at every node), and comparisons into mask registers
+/// (docs/PERF.md, "The AVX-512 build").
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512vl,avx2,fma")]
 #[inline(never)]

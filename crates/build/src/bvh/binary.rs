@@ -99,8 +99,8 @@ const _: () = assert!(std::mem::size_of::<PrimRef>() == 32);
 /// What a [`PrimRef`]'s id is xored with to make its `hi.w`: a normal float for every id
 /// below 2^30 - 2^23 (an id's own bits are a denormal below 2^23). The builder's vector
 /// arithmetic runs on that lane too (and ignores it), and arithmetic on denormals takes a
-/// microcode assist of a hundred cycles or more on Intel CPUs (grid:1000 builds 1.3x faster
-/// without them, bench/ab.sh on an Intel Xeon).
+/// microcode assist of a hundred cycles or more on Intel CPUs (docs/PERF.md, "Denormals in
+/// the ignored lane").
 /// (Larger ids give an infinity or NaN there, which costs nothing; the bits are exact anyway:
 /// references are moved, never computed.)
 pub(crate) const ID_FLIP: u32 = 0x4000_0000;
@@ -405,7 +405,8 @@ pub(crate) fn find_split<const NB: usize, const SETS: usize, const LONGEST: bool
 #[inline(always)]
 pub(crate) fn sweep<const NB: usize>(cnt: &[u32; NB], blo: &[Vec4; NB], bhi: &[Vec4; NB]) -> (f32, usize) {
     // The boxes and counts left and right of each split, grown from both ends in one loop:
-    // the two chains of `min`s and `max`s (which a small node's split waits on) overlap.
+    // the two chains of `min`s and `max`s (which a small node's split waits on) overlap
+    // (docs/PERF.md, "SAH sweep from both ends").
     let (mut left_area, mut left_cnt) = ([0f32; NB], [0u32; NB]);
     let (mut right_area, mut right_cnt) = ([0f32; NB], [0u32; NB]);
     let (mut llo, mut lhi, mut lc) = (Vec4::INFINITY, Vec4::NEG_INFINITY, 0u32);

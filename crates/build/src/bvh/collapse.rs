@@ -91,7 +91,7 @@ impl<'a> BRef<'a> {
     /// other while its 8-wide node has free slots (as Embree's builder splits every child of
     /// more than a block's worth to fill a node), and keeps it a leaf of its primitives
     /// (contiguous: a subtree's are) when there is no room. A leaf test is then often one
-    /// block where it was two (Embree's leaf SAH cost is 20-30% below a tree without them).
+    /// block where it was two (docs/PERF.md, "Soft nodes").
     pub(crate) fn soft(&self) -> Option<(u32, u32)> {
         match *self {
             BRef::Boxed(..) => None,

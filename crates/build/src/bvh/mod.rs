@@ -23,15 +23,8 @@ use crate::bvh::spare::{SPARE_NODES, SPARE_ORDER, SPARE_REFS};
 
 /// Cost of one node traversal relative to one test of a block of four primitives. Two, not
 /// one, though a node step takes fewer instructions than a block test: a node is 256 bytes
-/// against a block's 144, every block test comes after a node visit, and trees priced so
-/// measured at least as fast, with fewer nodes and bytes. Against 1 (`megaray info --tree`;
-/// `bench/ab.sh` with the two scenes, one binary, Intel Xeon): grid:1000 67K 8-wide nodes
-/// instead of 95K, 46.0 bytes per triangle instead of 49.6; sphereflake:4 50.3 (52.8);
-/// stanford-bunny 47.7 (50.7); 3-4% fewer node visits and 13-19% more blocks tested per
-/// shadow or diffuse ray (leaves fuller, two-block leaves tested in one pass), +0.5-2% shadow
-/// and diffuse rays per second on sphereflake:3 and stanford-bunny (30 rounds), +2-5% on
-/// grid:1000, primary rays within noise, build time unchanged. 3 gains nothing more
-/// (+-1.5%); 1.5 and 0.7 are noise.
+/// against a block's 144 and every block test follows a node visit, and trees priced so
+/// traced at least as fast, with fewer nodes and bytes. Why 2: docs/PERF.md, "Node visit price".
 const C_TRAV: f32 = 2.0;
 /// Primitives are tested four at a time (one SIMD block), so the SAH counts blocks.
 const BLOCK: u32 = 4;
@@ -50,11 +43,8 @@ pub enum Quality {
     Medium,
     /// Binned SAH on all three axes at every node: 64 bins from 1024 primitives, 32 from 128,
     /// 16 below, and the collapse into 8-wide nodes by a dynamic program (`Costs`) rather
-    /// than greedily. About 25% slower to build than [`Quality::Medium`]; leaves are packed
-    /// fuller and trees trace faster (measured on grid:1000: 64.9 bytes per triangle instead
-    /// of 67.4, 7% fewer triangle blocks and 3% fewer nodes tested per diffuse ray; the
-    /// dynamic program then 56.6 -> 49.6 bytes and SAH cost 16.26 -> 15.59; these with
-    /// [`C_TRAV`] at 1, since raised to 2: 46.0 bytes).
+    /// than greedily. About 25% slower to build than [`Quality::Medium`]; its trees are
+    /// smaller and trace faster (docs/PERF.md, "Build qualities and the collapse").
     #[default]
     High,
 }

@@ -6,12 +6,11 @@ use crate::bvh::NodeB;
 /// Arrays of one kind kept from one build to the next, emptied: the builder's largest
 /// (references, 8-wide nodes, primitive order: about 70 bytes per primitive). Parts of a
 /// model are built one after another and benchmarks repeat builds, and fresh memory costs a
-/// page fault per 4 KiB when first written: 2.5-3.5 us each on a virtual machine
-/// (measured), which on grid:1000 was over 100 ms of a 1.2 s build. At most
+/// page fault per 4 KiB when first written (docs/PERF.md, "Spare arrays"). At most
 /// [`Spare::new`]'s `keep` arrays of a kind are kept (one per build running at once). The
 /// price: a part's references stay allocated through its tile stage instead of being freed
-/// before it, 32 bytes per triangle more at the peak (grid:1000 built as one part peaks at
-/// 406 MiB instead of 321), within the [`crate::INCORE_BYTES_PER_TRI`] a part is budgeted.
+/// before it, 32 bytes per triangle more at the peak, within the
+/// [`crate::INCORE_BYTES_PER_TRI`] a part is budgeted.
 pub(crate) struct Spare<T> {
     kept: std::sync::Mutex<Vec<Vec<T>>>,
     keep: usize,
