@@ -38,6 +38,12 @@ impl Camera {
         Camera::look_at(c + offset * d, c, Vec3::Y, 60.0, width, height)
     }
 
+    /// The angle a pixel spans (radians, vertically; near enough across for the square
+    /// pixels of any image): the spread of a camera ray's footprint.
+    pub fn pixel_angle(&self) -> f32 {
+        2.0 * self.tan_half / self.height as f32
+    }
+
     /// The ray through image position (`px`, `py`) (pixel units, `(x + 0.5, y + 0.5)` is the
     /// centre of pixel (x, y)), with a normalised direction.
     #[inline]

@@ -31,6 +31,7 @@
 
 pub mod attrs;
 pub mod bvh;
+pub mod lod;
 pub mod sink;
 pub mod split;
 pub mod stream;
@@ -80,6 +81,9 @@ pub struct BuildOptions {
     /// How hard each part's builder looks for good splits (the top-level tree over the parts
     /// is always built at [`Quality::High`]: it is small).
     pub quality: Quality,
+    /// Levels of detail made for each part ([`lod`]); `None`: none (the scene then holds
+    /// exactly the full-detail parts).
+    pub lod: Option<lod::LodOptions>,
     /// Set it from another thread (a Ctrl-C handler) to stop the build; it then returns
     /// [`BuildError::Cancelled`] and removes its temporary files.
     pub cancel: Arc<AtomicBool>,
@@ -95,6 +99,7 @@ impl Default for BuildOptions {
             split_fanout: 256,
             import_mem: None,
             quality: Quality::High,
+            lod: Some(lod::LodOptions::default()),
             cancel: Arc::new(AtomicBool::new(false)),
         }
     }
@@ -117,6 +122,9 @@ pub struct BuildSummary {
     pub triangles: u64,
     pub degenerate_dropped: u64,
     pub parts: u32,
+    /// Levels of detail made (parts of their own in the file), and their bytes.
+    pub lod_parts: u32,
+    pub lod_bytes: u64,
     pub tiles: u32,
     /// Deepest level of the split hierarchy (0: the whole model was one part).
     pub split_levels: u32,
@@ -238,7 +246,10 @@ pub fn build_scene(
     let t2 = Instant::now();
     let boxes: Vec<Aabb> = parts.iter().map(|p| p.bounds).collect();
     let (top_nodes, top_depth) = top_level(&boxes);
-    let writer = SceneWriter::create(out, top_nodes, top_depth, parts.len() as u32, opts.tile_target)?;
+    let lod_capacity = opts.lod.map_or(0, |l| l.max_levels as u32) * parts.len() as u32;
+    let writer = SceneWriter::create(out, top_nodes, top_depth, parts.len() as u32, lod_capacity, opts.tile_target)?;
+    let lod_count = std::sync::atomic::AtomicU32::new(0);
+    let lod_bytes = std::sync::atomic::AtomicU64::new(0);
     let writer = Mutex::new(writer);
     progress.stage("build parts", triangles);
     let single = parts.len() == 1;
@@ -247,9 +258,17 @@ pub fn build_scene(
         use rayon::prelude::*;
         parts.par_iter().enumerate().with_max_len(1).try_for_each(|(i, p)| -> Result<(), BuildError> {
             check_cancel(opts)?;
-            let blob = build_part(p, attrs, opts, single, &io)?;
+            let (blob, lods) = build_part(p, attrs, opts, single, &io)?;
             let n = blob.tri_count;
-            writer.lock().unwrap_or_else(|e| e.into_inner()).append_part(i as u32, &blob)?;
+            let mut w = writer.lock().unwrap_or_else(|e| e.into_inner());
+            w.append_part(i as u32, &blob)?;
+            for (k, (error, lod)) in lods.into_iter().enumerate() {
+                w.append_lod(i as u32, k as u32 + 1, error, &lod)?;
+                lod_count.fetch_add(1, Ordering::Relaxed);
+                lod_bytes.fetch_add(lod.tiles.iter().map(|t| t.bytes().div_ceil(4096) * 4096).sum(), Ordering::Relaxed);
+                recycle_part(lod);
+            }
+            drop(w);
             recycle_part(blob);
             let _ = std::fs::remove_file(&p.path);
             progress.inc(n);
@@ -270,6 +289,8 @@ pub fn build_scene(
         triangles,
         degenerate_dropped: dropped,
         parts: parts.len() as u32,
+        lod_parts: lod_count.load(Ordering::Relaxed),
+        lod_bytes: lod_bytes.load(Ordering::Relaxed),
         tiles,
         split_levels,
         split_passes: io.passes.load(Ordering::Relaxed),
@@ -325,14 +346,16 @@ pub fn release_spare() {
     tiles::release_spare();
 }
 
-/// Loads one part's stream, builds its tree, cuts it into tiles and gathers its attributes.
+/// Loads one part's stream, builds its tree, cuts it into tiles and gathers its attributes;
+/// then its levels of detail ([`lod`]), each with its error and its own tree and tiles
+/// (their slots carry the materials and colours of the triangles they stand for).
 fn build_part(
     s: &StreamFile,
     attrs: &attrs::AttrStreams,
     opts: &BuildOptions,
     parallel: bool,
     io: &split::IoCount,
-) -> Result<PartBlob, BuildError> {
+) -> Result<(PartBlob, Vec<(f32, PartBlob)>), BuildError> {
     let mut recs = vec![StreamTri { v: [[0.0; 3]; 3], reserved: 0, id: 0 }; s.count as usize];
     let mut r = StreamReader::open(s)?;
     let mut at = 0;
@@ -348,23 +371,37 @@ fn build_part(
     let tris: Vec<[[f32; 3]; 3]> = recs.iter().map(|t| t.v).collect();
     drop(recs);
     let (mut blob, tri_source) = build_in_core(&tris, opts.tile_target, parallel, opts.quality);
+    let levels = opts.lod.map(|l| lod::levels(&tris, &l)).unwrap_or_default();
     drop(tris);
-    // Attributes per slot; padding lanes repeat the id of the block's first triangle.
+    let slot_ids = per_slot(&tri_source, |i| ids[i as usize]);
+    blob.normals = attrs.gather::<PackedNormals>(attrs::NORMAL, &slot_ids)?;
+    blob.uvs = attrs.gather::<[[f32; 2]; 3]>(attrs::UV, &slot_ids)?;
+    blob.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &slot_ids)?;
+    blob.materials = attrs.gather::<u32>(attrs::MATERIAL, &slot_ids)?;
+    let mut lods = Vec::with_capacity(levels.len());
+    for level in levels {
+        let (mut lb, src) = build_in_core(&level.tris, opts.tile_target, parallel, opts.quality);
+        let slot_ids = per_slot(&src, |i| ids[level.source[i as usize] as usize]);
+        lb.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &slot_ids)?;
+        lb.materials = attrs.gather::<u32>(attrs::MATERIAL, &slot_ids)?;
+        lods.push((level.error, lb));
+    }
+    Ok((blob, lods))
+}
+
+/// The attribute id of each triangle slot, from the slots' triangles (`source`, as
+/// [`build_in_core`] returns it); padding lanes repeat the id of the block's first triangle.
+fn per_slot(source: &[u32], id_of: impl Fn(u32) -> u64) -> Vec<u64> {
     let mut last = 0;
-    let ids: Vec<u64> = tri_source
+    source
         .iter()
         .map(|&i| {
             if i != tiles::PADDING {
-                last = ids[i as usize];
+                last = id_of(i);
             }
             last
         })
-        .collect();
-    blob.normals = attrs.gather::<PackedNormals>(attrs::NORMAL, &ids)?;
-    blob.uvs = attrs.gather::<[[f32; 2]; 3]>(attrs::UV, &ids)?;
-    blob.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &ids)?;
-    blob.materials = attrs.gather::<u32>(attrs::MATERIAL, &ids)?;
-    Ok(blob)
+        .collect()
 }
 
 /// Builds one part in core from triangles in memory: its 8-wide BVH, cut into tiles of

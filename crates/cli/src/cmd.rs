@@ -128,6 +128,11 @@ pub struct BuildArgs {
     /// slower to trace).
     #[arg(long, value_enum, default_value = "high")]
     quality: QualityArg,
+    /// Make no levels of detail (by default each part gets coarser stand-ins, made by vertex
+    /// clustering, for `render --lod-error` to trace far geometry in and for rays to fall
+    /// back on while tiles load; a few percent of the file).
+    #[arg(long)]
+    no_lod: bool,
     /// Print the build summary as one JSON object.
     #[arg(long)]
     json: bool,
@@ -192,6 +197,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             QualityArg::High => Quality::High,
             QualityArg::Medium => Quality::Medium,
         },
+        lod: if a.no_lod { None } else { BuildOptions::default().lod },
         ..BuildOptions::default()
     };
     let cancel = opts.cancel.clone();
@@ -206,6 +212,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             serde_json::json!({
                 "out": a.out, "inputs": s.inputs, "triangles": s.triangles,
                 "degenerate_dropped": s.degenerate_dropped, "parts": s.parts, "tiles": s.tiles,
+                "lod_parts": s.lod_parts, "lod_bytes": s.lod_bytes,
                 "split_levels": s.split_levels, "split_passes": s.split_passes, "part_limit": s.part_limit, "file_bytes": s.file_bytes,
                 "input_bytes": s.input_bytes, "temp_read": s.temp_read, "temp_written": s.temp_written,
                 "import_s": s.import_s, "split_s": s.split_s, "parts_s": s.parts_s, "total_s": s.total_s,
@@ -227,6 +234,14 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             format_size(s.file_bytes),
             s.file_bytes as f64 / s.triangles as f64
         );
+        if s.lod_parts > 0 {
+            eprintln!(
+                "levels of detail: {} parts, {} ({:.1}% of the file)",
+                s.lod_parts,
+                format_size(s.lod_bytes),
+                100.0 * s.lod_bytes as f64 / s.file_bytes as f64
+            );
+        }
         eprintln!(
             "time {:.1} s (import {:.1}, split {:.1}, parts {:.1}), {:.2} M triangles/s; read {} input + {} temp, wrote {} temp + {} scene",
             s.total_s,
@@ -337,9 +352,20 @@ pub struct RenderArgs {
     #[command(flatten)]
     paging: crate::paging::PagingArgs,
     /// End each frame after MS milliseconds even if pixels wait for scene data (they are
-    /// left to the next frames; with one frame they stay black and are counted).
+    /// left to the next frames; with one frame they stay black and are counted). With levels
+    /// of detail in the scene, rays that need a tile not yet resident are answered by a
+    /// coarser level that is, at once (the tile is loaded for the next frames), so no pixel
+    /// waits for data.
     #[arg(long, value_name = "MS")]
     deadline: Option<u64>,
+    /// The error allowed to levels of detail, in pixels: far geometry is traced in coarser
+    /// stand-ins whose error (every point within it of the full model) is at most this many
+    /// pixels' footprint where a ray meets them. 0: full detail (the image then equals that
+    /// of a scene built without levels of detail). With --mem, the error rises above this
+    /// when a frame's working set would not fit the budget, and falls back when it does
+    /// (printed with --stats and --json).
+    #[arg(long, value_name = "PIXELS", default_value_t = 1.0)]
+    lod_error: f32,
     /// A camera path instead of a still: N frames orbiting the point looked at (DEG degrees
     /// in all, default 360), each rendered on its own; prints frame times and bytes read
     /// (one JSON line per frame with --json); the image is the last frame.
@@ -381,6 +407,7 @@ impl RenderArgs {
             threads: None,
             paging: Default::default(),
             deadline: None,
+            lod_error: 1.0,
             orbit: None,
         }
     }
@@ -412,6 +439,9 @@ const CHECK_AT_ONCE: u64 = 1 << 30;
 pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     if !(1..=65536).contains(&a.spp) {
         bail!("--spp must be 1..=65536");
+    }
+    if !(a.lod_error >= 0.0 && a.lod_error.is_finite()) {
+        bail!("--lod-error must be a number of pixels, 0 or more");
     }
     if !(a.fov > 0.0 && a.fov < 180.0) {
         bail!("--fov must be between 0 and 180 degrees");
@@ -497,6 +527,8 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     settings.ao_radius = a.ao_radius;
     settings.aovs = aovs;
     settings.frame_deadline = a.deadline.map(Duration::from_millis);
+    // Frames against a deadline answer rays from resident stand-ins rather than wait.
+    settings.stand_in = a.deadline.is_some();
     let pool = pool(a.threads)?;
     let t = Instant::now();
     let mut renderer = Renderer::new(settings, &b);
@@ -521,7 +553,8 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             }
             Tracer::new(&scene)
         }
-    };
+    }
+    .with_lod_error(a.lod_error);
     if let Some(spec) = &a.orbit {
         let o = crate::paging::parse_orbit(spec)?;
         let (fov, up) = (a.fov, a.up);
@@ -635,8 +668,13 @@ pub fn info(a: InfoArgs) -> Result<()> {
         scene.verify_all()?;
     }
     let h = *scene.header();
-    let parts = scene.parts();
-    let tiles = scene.tiles();
+    // The full-detail parts (the levels of detail after them are reported on their own).
+    let full = scene.full_part_count();
+    let parts = &scene.parts()[..full as usize];
+    let tiles: Vec<_> = scene.tiles().iter().filter(|t| t.part < full).copied().collect();
+    let lod_bytes = scene.lod_bytes();
+    let lod_errors: Vec<f32> = scene.parts()[full as usize..].iter().map(|p| p.lod_error).collect();
+    let lod_levels = parts.iter().enumerate().map(|(i, _)| scene.lod_chain(i as u32).count() - 1).max().unwrap_or(0);
     let n = h.tri_count.max(1) as f64;
     let node_bytes: u64 = tiles.iter().map(|t| t.node_count as u64 * megaray_scene::format::NODE_BYTES as u64).sum();
     let tri_bytes: u64 = tiles.iter().map(|t| t.blocks as u64 * 144).sum();
@@ -655,7 +693,7 @@ pub fn info(a: InfoArgs) -> Result<()> {
                 .sum::<u64>()
         })
         .sum();
-    let meta = h.file_bytes - tile_total - attr_bytes;
+    let meta = h.file_bytes - tile_total - attr_bytes - lod_bytes;
     let depths: Vec<u32> = parts.iter().map(|p| p.depth).collect();
     let (dmin, dmax) = (depths.iter().min().copied().unwrap_or(0), depths.iter().max().copied().unwrap_or(0));
     let tile_sizes: Vec<u32> = tiles.iter().map(|t| t.bytes).collect();
@@ -674,7 +712,11 @@ pub fn info(a: InfoArgs) -> Result<()> {
                 "file": a.scene, "format_version": h.version, "file_bytes": h.file_bytes,
                 "triangles": h.tri_count, "degenerate_dropped": h.degenerate_dropped,
                 "bounds": {"min": h.bounds.min, "max": h.bounds.max},
-                "parts": h.part_count, "tiles": h.tile_count, "tile_target": h.tile_target,
+                "parts": full, "tiles": tiles.len(), "tile_target": h.tile_target,
+                "lod": {"parts": h.lod_part_count, "levels_max": lod_levels, "bytes": lod_bytes,
+                        "fraction_of_file": lod_bytes as f64 / h.file_bytes as f64,
+                        "error_min": lod_errors.iter().copied().fold(f32::INFINITY, f32::min),
+                        "error_max": lod_errors.iter().copied().fold(0.0, f32::max)},
                 "tile_bytes_mean": tmean, "materials": h.material_count, "block_fill": fill,
                 "top_depth": h.top_depth, "top_nodes": h.top_node_count,
                 "part_depth_min": dmin, "part_depth_max": dmax,
@@ -684,6 +726,7 @@ pub fn info(a: InfoArgs) -> Result<()> {
                     "total": h.file_bytes as f64 / n, "nodes": node_bytes as f64 / n,
                     "triangle_blocks": tri_bytes as f64 / n, "tile_padding": padding as f64 / n,
                     "attributes": attr_bytes as f64 / n, "tables": meta as f64 / n,
+                    "levels_of_detail": lod_bytes as f64 / n,
                 },
                 "verified": a.verify,
                 "tree": tree,
@@ -694,11 +737,11 @@ pub fn info(a: InfoArgs) -> Result<()> {
     println!("{} (scene format version {})", a.scene.display(), h.version);
     println!("  triangles        {} ({} degenerate dropped at build)", h.tri_count, h.degenerate_dropped);
     println!("  bounds           {:?} .. {:?}", h.bounds.min, h.bounds.max);
-    println!("  parts            {} (top-level tree: {} nodes, depth {})", h.part_count, h.top_node_count, h.top_depth);
+    println!("  parts            {} (top-level tree: {} nodes, depth {})", full, h.top_node_count, h.top_depth);
     println!("  part tree depth  {dmin} .. {dmax}");
     println!(
         "  tiles            {} (target {}, mean payload {})",
-        h.tile_count,
+        tiles.len(),
         format_size(h.tile_target as u64),
         format_size(tmean as u64)
     );
@@ -709,6 +752,20 @@ pub fn info(a: InfoArgs) -> Result<()> {
     println!("    tile padding   {:.1}", padding as f64 / n);
     println!("    attributes     {:.1}", attr_bytes as f64 / n);
     println!("    tables, header {:.1}", meta as f64 / n);
+    if h.lod_part_count > 0 {
+        println!(
+            "    levels of detail {:.1} ({}, {:.1}% of the file: {} parts, up to {} levels a part, errors {:.3e} .. {:.3e})",
+            lod_bytes as f64 / n,
+            format_size(lod_bytes),
+            100.0 * lod_bytes as f64 / h.file_bytes as f64,
+            h.lod_part_count,
+            lod_levels,
+            lod_errors.iter().copied().fold(f32::INFINITY, f32::min),
+            lod_errors.iter().copied().fold(0.0, f32::max)
+        );
+    } else {
+        println!("    levels of detail none (built with --no-lod)");
+    }
     if let Some(t) = tree {
         println!(
             "  tree             {} inner nodes ({:.0}% of child slots used), {} leaves, {} blocks",
@@ -791,6 +848,7 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
                 tile_size: 256 << 10,
                 threads: None,
                 quality: QualityArg::High,
+                no_lod: false,
                 json: false,
             },
             bars,

@@ -155,6 +155,7 @@ pub fn orbit(
     let mut bytes = Vec::with_capacity(n as usize);
     let mut jobs = JobStats::default();
     let mut last = None;
+    let mut governor = megaray_render::LodGovernor::new(tracer);
     let start = Instant::now();
     for k in 0..n {
         let angle = (deg * k as f32 / n as f32).to_radians();
@@ -162,8 +163,11 @@ pub fn orbit(
         let read0 = read_bytes().unwrap_or(0);
         let loaded0 = tracer.pager().map_or(0, |p| p.stats().bytes_loaded);
         let t = Instant::now();
+        let lod_error = tracer.lod_error();
         let f = pool.install(|| render_frame(&r, tracer, 0));
         let secs = t.elapsed().as_secs_f64();
+        let approx = f.approx.iter().filter(|&&a| a).count();
+        governor.after_frame(tracer);
         let read = read_bytes().unwrap_or(0).saturating_sub(read0);
         let loaded = tracer.pager().map_or(0, |p| p.stats().bytes_loaded) - loaded0;
         times.push(secs);
@@ -180,6 +184,7 @@ pub fn orbit(
                     "frame": k, "seconds": secs, "read_bytes": read, "loaded_bytes": loaded,
                     "suspensions": f.jobs.suspended, "unfinished": f.jobs.unfinished,
                     "wait_seconds": f.jobs.wait_secs, "rays": f.rays,
+                    "lod_error": lod_error, "approx_pixels": approx,
                 })
             );
         }

@@ -158,7 +158,8 @@ fn random_byte_flips_never_panic() {
     for i in 0..300 {
         let mut b = bytes.clone();
         // Half the flips in the first pages (header, tables), half anywhere.
-        let at = if i % 2 == 0 { (rng.next_u64() % 16384) as usize } else { (rng.next_u64() % b.len() as u64) as usize };
+        let at =
+            if i % 2 == 0 { (rng.next_u64() % 16384) as usize } else { (rng.next_u64() % b.len() as u64) as usize };
         b[at] ^= 1 << (rng.next_u64() % 8);
         let p = dir.path().join("flipped.mray");
         std::fs::write(&p, &b).unwrap();

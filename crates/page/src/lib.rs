@@ -29,7 +29,9 @@
 //!   The evictor flips the epoch and waits for the old parity's counts to drain (classic
 //!   two-phase quiescence, as in userspace RCU). Readers never wait for the evictor.
 //! - The header page and the tables (top-level tree, part and tile directories, materials)
-//!   stay resident: they are "pinned" and counted against the budget up front.
+//!   stay resident: they are "pinned" and counted against the budget up front; so do the
+//!   tiles of the coarsest level of detail of every part (a scene built with levels of
+//!   detail), loaded when the pager starts: a ray can always be answered by a stand-in.
 //!
 //! What a resident tile costs: its node and block bytes plus the attributes of its triangle
 //! slots ([`Scene::tile_ranges`]), each range widened to whole pages.
@@ -63,6 +65,10 @@ const CORRUPT: u32 = 16;
 /// Loaded and not yet used: protected from eviction for [`FRESH_MS`], so that the rays
 /// waiting for it get to use it before a busy fetcher pushes it out again.
 const FRESH: u32 = 32;
+
+/// Loaded at the start and never evicted: the tiles of the coarsest level of detail of every
+/// part, what a ray falls back on when nothing finer is resident.
+const PINNED: u32 = 64;
 
 /// How long a loaded tile nobody has used yet is protected from eviction.
 const FRESH_MS: u64 = 50;
@@ -230,11 +236,29 @@ fn pages(len: u64, off: u64) -> u64 {
     (off + len).div_ceil(PAGE) * PAGE - off / PAGE * PAGE
 }
 
-/// The resident cost of each tile (its ranges widened to pages) and of the pinned tables.
+/// The resident cost of each tile (its ranges widened to pages) and of what is pinned: the
+/// tables and the tiles of [`pinned_tiles`].
 fn costs(scene: &Scene) -> (Vec<u64>, u64) {
     let sum = |r: &[(u64, u64)]| r.iter().map(|&(o, l)| pages(l, o)).sum::<u64>();
-    let tiles = (0..scene.tiles().len() as u32).map(|t| sum(&scene.tile_ranges(t).unwrap_or_default())).collect();
-    (tiles, sum(&scene.pinned_ranges()))
+    let tiles: Vec<u64> =
+        (0..scene.tiles().len() as u32).map(|t| sum(&scene.tile_ranges(t).unwrap_or_default())).collect();
+    let pinned = sum(&scene.pinned_ranges()) + pinned_tiles(scene).map(|t| tiles[t as usize]).sum::<u64>();
+    (tiles, pinned)
+}
+
+/// The tiles always resident: those of the coarsest level of detail of each part that has
+/// levels of detail.
+fn pinned_tiles(scene: &Scene) -> impl Iterator<Item = u32> + '_ {
+    (0..scene.full_part_count()).filter_map(move |p| scene.lod_chain(p).skip(1).last()).flat_map(move |q| {
+        let e = &scene.parts()[q as usize];
+        e.first_tile..e.first_tile + e.tile_count
+    })
+}
+
+/// The largest tile that is not pinned (what the budget must have room for, twice).
+fn largest_unpinned(scene: &Scene, cost: &[u64]) -> u64 {
+    let pinned: std::collections::HashSet<u32> = pinned_tiles(scene).collect();
+    (0..cost.len() as u32).filter(|t| !pinned.contains(t)).map(|t| cost[t as usize]).max().unwrap_or(0)
 }
 
 impl Pager {
@@ -253,7 +277,7 @@ impl Pager {
         }
         let n = scene.tiles().len();
         let (cost, pinned) = costs(&scene);
-        let max_tile = cost.iter().copied().max().unwrap_or(0);
+        let max_tile = largest_unpinned(&scene, &cost);
         let need = pinned + 2 * max_tile;
         if opts.budget < need {
             return Err(PagerError::BudgetTooSmall {
@@ -296,6 +320,27 @@ impl Pager {
             shutdown: AtomicBool::new(false),
             scene,
         });
+        // The coarsest levels of detail, now: read and checked as any tile (a damaged one is
+        // recorded and skipped like any other), then never evicted.
+        for t in pinned_tiles(&shared.scene) {
+            let scene = &*shared.scene;
+            let ranges = scene.tile_ranges(t).unwrap_or_default();
+            let word = &shared.state[t as usize];
+            let read = ranges.iter().try_for_each(|&(o, l)| scene.load(o, l));
+            match read
+                .map_err(|e| SceneError::new(scene.path(), SceneErrorKind::Io, format!("tile {t}: cannot read: {e}")))
+                .and_then(|_| scene.check_tile(t))
+            {
+                Ok(()) => {
+                    word.store(AVAIL | PINNED, SeqCst);
+                }
+                Err(e) => {
+                    shared.corrupt.fetch_add(1, Relaxed);
+                    lock(&shared.first_error).get_or_insert(e);
+                    word.store(CORRUPT, SeqCst);
+                }
+            }
+        }
         let fetchers = (0..opts.fetchers.max(1))
             .map(|i| {
                 let s = shared.clone();
@@ -308,11 +353,11 @@ impl Pager {
         Ok(Pager { shared, fetchers })
     }
 
-    /// The smallest budget [`Pager::new`] accepts for `scene`: its pinned tables plus two of
-    /// its largest tiles.
+    /// The smallest budget [`Pager::new`] accepts for `scene`: what is pinned (tables, the
+    /// coarsest levels of detail) plus two of its largest other tiles.
     pub fn min_budget(scene: &Scene) -> u64 {
         let (cost, pinned) = costs(scene);
-        pinned + 2 * cost.iter().copied().max().unwrap_or(0)
+        pinned + 2 * largest_unpinned(scene, &cost)
     }
 
     /// The scene being paged.
@@ -605,7 +650,7 @@ impl Shared {
                 steps += 1;
                 let word = &self.state[v];
                 let st = word.load(SeqCst);
-                if st & AVAIL == 0 {
+                if st & AVAIL == 0 || st & PINNED != 0 {
                     continue;
                 }
                 if st & FRESH != 0 && now.saturating_sub(self.loaded_at[v].load(Relaxed)) < FRESH_MS {

@@ -24,6 +24,9 @@ pub struct Accumulator {
     frames: u32,
     /// Frames that finished each pixel (a frame with a deadline may leave some).
     counts: Vec<u32>,
+    /// Pixels whose sums hold only approximate samples ([`Frame::approx`]): the first exact
+    /// sample replaces them.
+    provisional: Vec<bool>,
     sum: Vec<[f64; 3]>,
     lum_sq: Vec<f64>,
     depth: Vec<f32>,
@@ -42,6 +45,7 @@ impl Accumulator {
             height,
             frames: 0,
             counts: vec![0; n],
+            provisional: vec![false; n],
             sum: vec![[0.0; 3]; n],
             lum_sq: vec![0.0; n],
             depth: Vec::new(),
@@ -69,6 +73,9 @@ impl Accumulator {
 
     /// Adds one frame (of this accumulator's size). Pixels the frame did not finish
     /// ([`Frame::done`]) are left out: each pixel is the mean of the frames that finished it.
+    /// An approximate pixel ([`Frame::approx`]: a stand-in answered for a missing tile)
+    /// counts only until the pixel's first exact sample, which replaces what it had; after
+    /// that, approximate samples of it are left out. The image converges to the exact one.
     pub fn add_frame(&mut self, f: &Frame) {
         assert_eq!(
             (f.image.width, f.image.height),
@@ -79,6 +86,14 @@ impl Accumulator {
             if !f.is_done(i) {
                 continue;
             }
+            let approx = f.is_approx(i);
+            if approx && self.counts[i] > 0 && !self.provisional[i] {
+                continue;
+            }
+            if !approx && self.provisional[i] {
+                (*s, *q, self.counts[i]) = ([0.0; 3], 0.0, 0);
+            }
+            self.provisional[i] = approx;
             self.counts[i] += 1;
             for k in 0..3 {
                 s[k] += p[k] as f64;
@@ -133,6 +148,11 @@ impl Accumulator {
     /// not, suspensions, time threads waited for tiles).
     pub fn jobs(&self) -> JobStats {
         self.jobs
+    }
+
+    /// Pixels with approximate samples only (stand-ins for tiles not loaded yet).
+    pub fn approx_pixels(&self) -> usize {
+        self.provisional.iter().filter(|&&p| p).count()
     }
 
     /// Pixels no frame has finished yet.
@@ -202,6 +222,7 @@ pub fn render_progressive(
 ) -> Accumulator {
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
     let mut acc = Accumulator::new(w, h);
+    let mut governor = crate::LodGovernor::new(tracer);
     let start = Instant::now();
     let max_frames = match (stop.frames, stop.time) {
         (Some(n), _) => n.max(1),
@@ -211,6 +232,7 @@ pub fn render_progressive(
     while acc.frames() < max_frames {
         let f = render_frame(r, tracer, acc.frames());
         acc.add_frame(&f);
+        governor.after_frame(tracer);
         on_frame(&acc);
         if stop.time.is_some_and(|t| start.elapsed() >= t) {
             break;

@@ -116,6 +116,7 @@ impl Renderer {
                     out.normal = sh.ns;
                     out.albedo = ctx.material(&sh).albedo;
                 }
+                ctx.enter(&hit);
                 out.radiance = self.shader.shade(&ray, &sh, &mut ctx)?;
             }
         }
@@ -158,6 +159,10 @@ pub struct Frame {
     /// Per pixel, whether it was finished: empty when every pixel was. Only a frame with a
     /// deadline ([`FrameOptions::deadline`]) can leave pixels unfinished; they are black.
     pub done: Vec<bool>,
+    /// Per pixel, whether a stand-in answered some ray for want of a tile (its value is
+    /// approximate; a later frame with the tile refines it): empty when none did. Only a
+    /// frame with [`FrameOptions::stand_in`] has them.
+    pub approx: Vec<bool>,
     /// Rays fired in the frame.
     pub rays: u64,
     /// What the frame loop did: pixels finished and not, suspensions, waiting.
@@ -174,9 +179,15 @@ impl Frame {
             normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
             albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
             done: Vec::new(),
+            approx: Vec::new(),
             rays: 0,
             jobs: JobStats::default(),
         }
+    }
+
+    /// Whether pixel `i` (row-major) is approximate ([`Frame::approx`]).
+    pub fn is_approx(&self, i: usize) -> bool {
+        self.approx.get(i).copied().unwrap_or(false)
     }
 
     /// Whether pixel `i` (row-major) was finished.
@@ -191,6 +202,9 @@ pub struct FrameOptions {
     /// End the frame at this instant even if pixels are left (they are flagged in
     /// [`Frame::done`]).
     pub deadline: Option<Instant>,
+    /// Rays that need a tile not resident are answered by a coarser level of detail that is
+    /// (the tile requested; the pixel flagged in [`Frame::approx`]) rather than wait for it.
+    pub stand_in: bool,
 }
 
 /// The tile edge of the frame loop, in pixels.
@@ -217,7 +231,7 @@ fn tile_order(w: u32, h: u32) -> Vec<u32> {
 /// With `settings.frame_deadline`, the frame ends that long after it started.
 pub fn render_frame(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
     let deadline = r.settings.frame_deadline.map(|d| Instant::now() + d);
-    render_frame_with(r, tracer, frame, &FrameOptions { deadline })
+    render_frame_with(r, tracer, frame, &FrameOptions { deadline, stand_in: r.settings.stand_in })
 }
 
 /// [`render_frame`] with options. The pixels run as [`megaray_trace::jobs`]: on a paged
@@ -240,22 +254,26 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     // Against a deadline, race through the pixels whose tiles are resident; without one,
     // keep the frame's accesses together (see `megaray_trace::jobs`).
     let max_parked = if opts.deadline.is_some() { jobs::MAX_PARKED_DEADLINE } else { jobs::MAX_PARKED };
-    let job_opts = JobOptions { chunk: 64, deadline: opts.deadline, max_parked };
+    let job_opts = JobOptions { chunk: 64, deadline: opts.deadline, max_parked, stand_in: opts.stand_in };
     let n = (w * h) as usize;
     let aovs = r.settings.aovs;
     let mut f = Frame::blank(w, h, aovs);
     // Jobs return 16 bytes a pixel without AOVs (the full sample with them): the results
     // of a frame are rebuilt every frame, so they are kept small.
     let mut finished: Vec<u32> = Vec::new();
+    let mut approx: Vec<u32> = Vec::new();
     if aovs {
         let run = jobs::run(tracer, n, &job_opts, |i, caster| {
             let p = order[i];
-            r.pixel(p % w, p / w, frame, caster)
+            r.pixel(p % w, p / w, frame, caster).map(|s| (s, caster.approx()))
         });
         f.jobs = run.stats;
-        for (i, s) in run.into_finished() {
+        for (i, (s, apx)) in run.into_finished() {
             let p = order[i] as usize;
             finished.push(p as u32);
+            if apx {
+                approx.push(p as u32);
+            }
             f.image.pixels[p] = s.radiance.to_array();
             f.rays += s.rays as u64;
             f.depth[p] = s.depth;
@@ -265,17 +283,26 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     } else {
         let run = jobs::run(tracer, n, &job_opts, |i, caster| {
             let p = order[i];
-            r.pixel(p % w, p / w, frame, caster).map(|s| (s.radiance.to_array(), s.rays))
+            r.pixel(p % w, p / w, frame, caster).map(|s| (s.radiance.to_array(), s.rays, caster.approx()))
         });
         f.jobs = run.stats;
         let partial = f.jobs.unfinished > 0;
-        for (i, (rgb, rays)) in run.into_finished() {
+        for (i, (rgb, rays, apx)) in run.into_finished() {
             let p = order[i] as usize;
             if partial {
                 finished.push(p as u32);
             }
+            if apx {
+                approx.push(p as u32);
+            }
             f.image.pixels[p] = rgb;
             f.rays += rays as u64;
+        }
+    }
+    if !approx.is_empty() {
+        f.approx = vec![false; n];
+        for p in approx {
+            f.approx[p as usize] = true;
         }
     }
     if f.jobs.unfinished > 0 {

@@ -60,6 +60,7 @@
 mod accum;
 mod env;
 mod frame;
+mod governor;
 mod image_out;
 mod material;
 mod sampling;
@@ -72,6 +73,7 @@ mod world;
 pub use accum::{render_progressive, Accumulator, Stop};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
 pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, SampleOut, TILE};
+pub use governor::LodGovernor;
 pub use image_out::{read_exr, save_exr, srgb, Aovs, Image, ImageError, ToneCurve, ToneMap};
 pub use material::{Material, DEFAULT_ALBEDO};
 pub use megaray_base::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};

@@ -43,6 +43,10 @@ pub struct RenderSettings {
     /// End each frame after this long even if pixels are left (out-of-core rendering: the
     /// pixels that wait for tiles are flagged in [`Frame::done`](crate::Frame::done) and left to later frames).
     pub frame_deadline: Option<Duration>,
+    /// Where a ray needs a tile that is not resident, answer it from a coarser level of
+    /// detail that is (the tile is requested; later frames refine the pixel) instead of
+    /// waiting ([`crate::FrameOptions::stand_in`]). Meant with a deadline, and for viewers.
+    pub stand_in: bool,
 }
 
 impl RenderSettings {
@@ -62,6 +66,7 @@ impl RenderSettings {
             ao_radius: 0.05,
             aovs: false,
             frame_deadline: None,
+            stand_in: false,
         }
     }
 }

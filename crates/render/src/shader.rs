@@ -27,7 +27,7 @@
 
 use megaray_base::{Ray, Vec3};
 use megaray_scene::Scene;
-use megaray_trace::{Hit, RayCaster, Suspended};
+use megaray_trace::{Cone, Hit, RayCaster, RayCone, Suspended};
 
 use crate::env::DirLight;
 use crate::material::{material_at, Material};
@@ -87,6 +87,9 @@ pub struct ShadeCtx<'a> {
     world: &'a World,
     /// The shader that shades the hits of [`ShadeCtx::trace`].
     shader: &'a dyn Shader,
+    /// The footprint of the rays this context fires next, and the surface they leave
+    /// ([`ShadeCtx::enter`]): what a tracer with levels of detail chooses them by.
+    cone: RayCone,
     caster: &'a mut dyn RayCaster,
     sampler: Sampler,
     subset: u32,
@@ -104,7 +107,29 @@ impl<'a> ShadeCtx<'a> {
         sampler: Sampler,
         subset: u32,
     ) -> Self {
-        ShadeCtx { world, shader, caster, sampler, subset, depth: 0, rays: 0 }
+        let cone = RayCone::camera(world.settings.camera.pixel_angle());
+        ShadeCtx { world, shader, caster, sampler, subset, cone, depth: 0, rays: 0 }
+    }
+
+    /// The footprint of the rays fired next ([`RayCaster::intersect_cone`]).
+    pub fn cone(&self) -> RayCone {
+        self.cone
+    }
+
+    /// Makes the rays fired next leave `hit`'s surface, `hit.t` along a ray of the current
+    /// footprint: they start as wide as that ray was there and widen twice as fast (a bounce
+    /// spreads them), and keep to the level of detail of the surface's part or coarser.
+    /// Returns the footprint before, to give back to [`ShadeCtx::leave`].
+    pub fn enter(&mut self, hit: &Hit) -> RayCone {
+        let before = self.cone;
+        let c = before.cone;
+        self.cone = RayCone { cone: Cone { width: c.at(hit.t), spread: 2.0 * c.spread }, from_part: Some(hit.part) };
+        before
+    }
+
+    /// Restores the footprint [`ShadeCtx::enter`] returned.
+    pub fn leave(&mut self, before: RayCone) {
+        self.cone = before;
     }
 
     /// The world (settings, environment, scale).
@@ -122,16 +147,16 @@ impl<'a> ShadeCtx<'a> {
         self.caster.scene()
     }
 
-    /// The closest hit of `ray`.
+    /// The closest hit of `ray` (its footprint this context's [`ShadeCtx::cone`]).
     pub fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended> {
         self.rays += 1;
-        self.caster.intersect(ray)
+        self.caster.intersect_cone(ray, &self.cone)
     }
 
     /// Whether anything lies on `ray` (any hit, for shadows).
     pub fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended> {
         self.rays += 1;
-        self.caster.occluded(ray)
+        self.caster.occluded_cone(ray, &self.cone)
     }
 
     /// Rays fired so far.
@@ -154,7 +179,9 @@ impl<'a> ShadeCtx<'a> {
         let sh = SurfaceHit::new(self.scene(), ray, hit);
         let shader = self.shader;
         self.depth += 1;
+        let before = self.enter(&hit);
         let c = shader.shade(ray, &sh, self);
+        self.leave(before);
         self.depth -= 1;
         c
     }
@@ -170,10 +197,13 @@ impl<'a> ShadeCtx<'a> {
     }
 
     /// A ray from `hit` in direction `dir`, its origin moved off the surface to the side
-    /// `dir` leaves on (by the world's epsilon).
+    /// `dir` leaves on: by the world's epsilon, plus the error of the surface's level of
+    /// detail (a stand-in lies within it of the surface it stands for, which must not
+    /// shadow it).
     pub fn spawn(&self, hit: &SurfaceHit, dir: Vec3) -> Ray {
         let side = if dir.dot(hit.ng) >= 0.0 { hit.ng } else { -hit.ng };
-        Ray { org: hit.p + side * self.world.eps(), dir, t_min: 0.0, t_max: f32::INFINITY }
+        let lod = self.scene().parts().get(hit.hit.part as usize).map_or(0.0, |p| p.lod_error);
+        Ray { org: hit.p + side * (self.world.eps() + lod), dir, t_min: 0.0, t_max: f32::INFINITY }
     }
 
     /// The next random number of this sample, in `[0, 1)`.

@@ -10,7 +10,7 @@ use megaray_base::Aabb;
 /// The first eight bytes of every scene file.
 pub const MAGIC: [u8; 8] = *b"MRAYSCN\x1a";
 /// The format version this code writes and reads.
-pub const VERSION: u32 = 4;
+pub const VERSION: u32 = 5;
 /// Page size: tiles and sections start on multiples of it.
 pub const PAGE: u64 = 4096;
 /// Bytes of the header page (the header struct is followed by zeros up to it).
@@ -30,10 +30,10 @@ pub const ATTR_MATERIAL: u32 = 8;
 /// | 8..12 | `version` |
 /// | 12..16 | `header_bytes` = 256 |
 /// | 16..24 | `file_bytes`: the file's exact length |
-/// | 24..32 | `tri_count`: triangles in the scene |
+/// | 24..32 | `tri_count`: triangles in the scene (full detail; levels of detail not counted) |
 /// | 32..40 | `degenerate_dropped`: zero-area triangles the build dropped |
 /// | 40..64 | `bounds`: scene bounding box (min xyz, max xyz) |
-/// | 64..68 | `part_count` |
+/// | 64..68 | `part_count`: full-detail parts, then `lod_part_count` levels of detail |
 /// | 68..72 | `tile_count` |
 /// | 72..76 | `tile_target`: the tile size the build aimed at, bytes |
 /// | 76..80 | `attr_flags`: `ATTR_*` bits |
@@ -45,7 +45,7 @@ pub const ATTR_MATERIAL: u32 = 8;
 /// | 112..120 | `materials_off`: offset of the material table ([`MaterialRecord`] array + names) |
 /// | 120..128 | `materials_bytes` |
 /// | 128..132 | `material_count` |
-/// | 132..136 | reserved, zero |
+/// | 132..136 | `lod_part_count`: the parts at the end of the directory that are levels of detail |
 /// | 136..144 | `meta_checksum`: XXH3-64 of top-level tree, part, tile and material tables, in that order |
 /// | 144..248 | reserved, zero |
 /// | 248..256 | `header_checksum`: XXH3-64 of bytes 0..248 |
@@ -71,7 +71,7 @@ pub struct Header {
     pub materials_off: u64,
     pub materials_bytes: u64,
     pub material_count: u32,
-    pub reserved0: u32,
+    pub lod_part_count: u32,
     pub meta_checksum: u64,
     pub reserved: [u64; 13],
     pub header_checksum: u64,
@@ -284,9 +284,21 @@ pub struct PartEntry {
     pub colors_off: u64,
     /// Offset of `slot_count` `u32` material ids (`u32::MAX`: none), or 0.
     pub materials_off: u64,
-    pub reserved: [u64; 2],
+    /// Levels of detail. For a full-detail part: its own index. For a level of detail: the
+    /// full-detail part it stands in for.
+    pub lod_of: u32,
+    /// 0 for full detail; `k` for the `k`-th coarser level of `lod_of`.
+    pub lod_level: u32,
+    /// Every point of this part's triangles lies within this distance of the triangles of
+    /// part `lod_of` (0 at full detail); never smaller than the finer level's.
+    pub lod_error: f32,
+    /// The next coarser level of `lod_of`, or [`NO_PART`] after the coarsest.
+    pub lod_next: u32,
 }
 const _: () = assert!(std::mem::size_of::<PartEntry>() == 128);
+
+/// No part: the end of a part's chain of levels of detail ([`PartEntry::lod_next`]).
+pub const NO_PART: u32 = u32::MAX;
 
 /// A tile directory entry. 40 bytes.
 ///

@@ -40,6 +40,11 @@ impl CheckedTiles<'_> {
     /// tile elsewhere, such as a paged tracer).
     pub const NONE: CheckedTiles<'static> = CheckedTiles(&[]);
 
+    /// Whether this is [`CheckedTiles::NONE`].
+    pub fn is_none(&self) -> bool {
+        self.0.is_empty()
+    }
+
     /// Whether tile `t` has been checked and found sound. Relaxed: the check publishes
     /// nothing but its verdict (the tile's bytes are the file's, never written), and a
     /// relaxed load lets the tracer's loop keep its other loads out of the loop.
@@ -349,15 +354,35 @@ impl Scene {
             }
         }
         let mut tri_total = 0u64;
-        for (i, p) in self.parts().iter().enumerate() {
+        let full = h
+            .part_count
+            .checked_sub(h.lod_part_count)
+            .filter(|&f| f > 0)
+            .ok_or_else(|| bad(format!("{} levels of detail but only {} parts", h.lod_part_count, h.part_count)))?;
+        let parts = self.parts();
+        for (i, p) in parts.iter().enumerate() {
             let tiles_end = p.first_tile as u64 + p.tile_count as u64;
+            let is_full = (i as u32) < full;
             if tiles_end > h.tile_count as u64
                 || p.root_tile < p.first_tile
                 || p.root_tile as u64 >= tiles_end
                 || p.root_node >= tiles[p.root_tile as usize].node_count
-                || p.first_prim != tri_total
+                || (is_full && p.first_prim != tri_total)
             {
                 return Err(bad(format!("part {i}: tile range or root out of bounds")));
+            }
+            // Levels of detail: a full part is level 0 of itself; each level names the full
+            // part it stands in for and chains to the next coarser one, errors not shrinking.
+            let lod_ok = match is_full {
+                true => p.lod_of == i as u32 && p.lod_level == 0 && p.lod_error == 0.0,
+                false => p.lod_of < full && p.lod_level >= 1 && p.lod_error.is_finite(),
+            } && (p.lod_next == NO_PART
+                || (p.lod_next >= full
+                    && parts.get(p.lod_next as usize).is_some_and(|n| {
+                        n.lod_of == p.lod_of && n.lod_level == p.lod_level + 1 && n.lod_error >= p.lod_error
+                    })));
+            if !lod_ok {
+                return Err(bad(format!("part {i}: bad level-of-detail chain")));
             }
             let n = p.slot_count;
             if n < p.tri_count as u64 || !n.is_multiple_of(4) {
@@ -368,7 +393,9 @@ impl Scene {
                     return Err(bad(format!("part {i}: attribute array lies outside the file")));
                 }
             }
-            tri_total += p.tri_count as u64;
+            if is_full {
+                tri_total += p.tri_count as u64;
+            }
         }
         if tri_total != h.tri_count {
             return Err(bad(format!("parts hold {tri_total} triangles, header says {}", h.tri_count)));
@@ -395,6 +422,31 @@ impl Scene {
             }
         }
         Ok(())
+    }
+
+    /// Full-detail parts: parts `0..full_part_count()`; the levels of detail follow them.
+    pub fn full_part_count(&self) -> u32 {
+        self.header.part_count - self.header.lod_part_count
+    }
+
+    /// The parts that stand in for full-detail part `part`, finest first: `part` itself
+    /// (level 0), then its levels of detail ([`PartEntry::lod_next`]).
+    pub fn lod_chain(&self, part: u32) -> impl Iterator<Item = u32> + '_ {
+        let parts = self.parts();
+        std::iter::successors(Some(part).filter(|&p| (p as usize) < parts.len()), move |&p| {
+            Some(parts[p as usize].lod_next).filter(|&n| n != NO_PART)
+        })
+    }
+
+    /// Bytes of the levels of detail: their tiles and attribute arrays.
+    pub fn lod_bytes(&self) -> u64 {
+        self.parts()[self.full_part_count() as usize..]
+            .iter()
+            .map(|p| {
+                let attrs = [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)];
+                p.tile_bytes + attrs.iter().filter(|a| a.0 != 0).map(|a| a.1 * p.slot_count).sum::<u64>()
+            })
+            .sum()
     }
 
     /// The file this scene was opened from.

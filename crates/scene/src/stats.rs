@@ -40,7 +40,8 @@ impl Scene {
         let total_tris = self.header().tri_count.max(1) as f64;
         let pool = self.node_pool();
         let tiles = self.tiles();
-        for p in self.parts() {
+        // Full detail only: the levels of detail are trees of their own, over other triangles.
+        for p in &self.parts()[..self.full_part_count() as usize] {
             let mut s = TreeStats::default();
             let Some(root) = self.tile(p.root_tile) else { continue };
             let root_box = (0..8).fold(Aabb::default(), |b, i| b.union(&root.nodes[p.root_node as usize].bounds(i)));

@@ -122,6 +122,9 @@ pub struct SceneWriter {
     cursor: u64,
     part_count: u32,
     parts: Vec<Option<PartEntry>>,
+    /// Levels of detail appended so far, in the order they came; numbered in `finish`.
+    lods: Vec<PartEntry>,
+    lod_capacity: u32,
     tiles: Vec<TileEntry>,
     tri_count: u64,
     tile_target: u32,
@@ -138,12 +141,14 @@ fn page_up(x: u64) -> u64 {
 
 impl SceneWriter {
     /// Starts `path` (written as a temporary file beside it) with the top-level tree, whose
-    /// `Part` references name the `part_count` parts to come.
+    /// `Part` references name the `part_count` parts to come, and room in the part directory
+    /// for up to `lod_capacity` levels of detail ([`SceneWriter::append_lod`]).
     pub fn create(
         path: &Path,
         top_nodes: Vec<Node8>,
         top_depth: u32,
         part_count: u32,
+        lod_capacity: u32,
         tile_target: u32,
     ) -> Result<SceneWriter, SceneError> {
         let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
@@ -169,7 +174,7 @@ impl SceneWriter {
                 };
             }
         }
-        let cursor = page_up(parts_off + part_count as u64 * 128);
+        let cursor = page_up(parts_off + (part_count as u64 + lod_capacity as u64) * 128);
         let mut w = SceneWriter {
             path: path.to_path_buf(),
             tmp,
@@ -177,6 +182,8 @@ impl SceneWriter {
             cursor,
             part_count,
             parts: vec![None; part_count as usize],
+            lods: Vec::new(),
+            lod_capacity,
             tiles: Vec::new(),
             tri_count: 0,
             tile_target,
@@ -198,6 +205,27 @@ impl SceneWriter {
     /// Appends part `index`: its tiles (page aligned), then its attribute arrays.
     pub fn append_part(&mut self, index: u32, part: &PartBlob) -> Result<(), SceneError> {
         assert!(index < self.part_count && self.parts[index as usize].is_none());
+        let entry = self.append_blob(index, part)?;
+        self.tri_count += part.tri_count;
+        self.parts[index as usize] = Some(PartEntry { lod_of: index, ..entry });
+        Ok(())
+    }
+
+    /// Appends level `level` (1 the finest) of detail of part `of`, whose triangles all lie
+    /// within `error` of part `of`'s: as a part of its own, numbered after the full-detail
+    /// parts, in the order of (`of`, `level`), when the file is finished.
+    pub fn append_lod(&mut self, of: u32, level: u32, error: f32, part: &PartBlob) -> Result<(), SceneError> {
+        assert!(of < self.part_count && level >= 1 && error.is_finite());
+        assert!((self.lods.len() as u32) < self.lod_capacity, "more levels of detail than the room made for them");
+        // Numbered provisionally in arrival order (the tiles' `part` says so until `finish`).
+        let index = self.part_count + self.lods.len() as u32;
+        let entry = self.append_blob(index, part)?;
+        self.lods.push(PartEntry { lod_of: of, lod_level: level, lod_error: error, ..entry });
+        Ok(())
+    }
+
+    /// Writes `part`'s tiles and attributes, its tiles numbered as of part `index`.
+    fn append_blob(&mut self, index: u32, part: &PartBlob) -> Result<PartEntry, SceneError> {
         let first_tile = self.tiles.len() as u32;
         let tri_count = part.tri_count;
         let slot_count = part.slot_count();
@@ -283,7 +311,10 @@ impl SceneWriter {
             uvs_off: 0,
             colors_off: 0,
             materials_off: 0,
-            reserved: [0; 2],
+            lod_of: index,
+            lod_level: 0,
+            lod_error: 0.0,
+            lod_next: NO_PART,
         };
         if let Some(a) = &part.normals {
             entry.normals_off = self.append_attr(bytemuck::cast_slice(a))?;
@@ -301,9 +332,7 @@ impl SceneWriter {
             entry.materials_off = self.append_attr(bytemuck::cast_slice(a))?;
             self.attr_flags |= ATTR_MATERIAL;
         }
-        self.tri_count += tri_count;
-        self.parts[index as usize] = Some(entry);
-        Ok(())
+        Ok(entry)
     }
 
     fn append_attr(&mut self, bytes: &[u8]) -> Result<u64, SceneError> {
@@ -326,7 +355,7 @@ impl SceneWriter {
         degenerate_dropped: u64,
         materials: &[MaterialDesc],
     ) -> Result<u64, SceneError> {
-        let mut parts = Vec::with_capacity(self.parts.len());
+        let mut parts = Vec::with_capacity(self.parts.len() + self.lods.len());
         let mut first_prim = 0;
         for (i, p) in self.parts.iter().enumerate() {
             match p {
@@ -334,6 +363,29 @@ impl SceneWriter {
                 None => panic!("part {i} was never appended"),
             }
             first_prim += parts[i].tri_count as u64;
+        }
+        // Levels of detail after the parts, by (part, level); each chained to the next
+        // coarser one, the part to its finest; their tiles renumbered to match.
+        let mut order: Vec<usize> = (0..self.lods.len()).collect();
+        order.sort_by_key(|&i| (self.lods[i].lod_of, self.lods[i].lod_level));
+        let mut final_index = vec![0u32; self.lods.len()];
+        for (rank, &i) in order.iter().enumerate() {
+            final_index[i] = self.part_count + rank as u32;
+        }
+        for &i in &order {
+            let e = self.lods[i];
+            let index = final_index[i];
+            let of = e.lod_of as usize;
+            let prev = if e.lod_level == 1 { of } else { parts.len() - 1 };
+            assert!(
+                parts[prev].lod_of == e.lod_of && parts[prev].lod_level + 1 == e.lod_level,
+                "the levels of detail of part {of} are not numbered 1, 2, ..."
+            );
+            parts[prev].lod_next = index;
+            parts.push(PartEntry { first_prim: parts[of].first_prim, ..e });
+            for t in &mut self.tiles[e.first_tile as usize..(e.first_tile + e.tile_count) as usize] {
+                t.part = index;
+            }
         }
         // The top-level tree's parts, as links to their roots (traversal then never looks a
         // part up), written over the placeholder `create` wrote.
@@ -371,7 +423,7 @@ impl SceneWriter {
             tri_count: self.tri_count,
             degenerate_dropped,
             bounds,
-            part_count: self.part_count,
+            part_count: parts.len() as u32,
             tile_count: tiles.len() as u32,
             tile_target: self.tile_target,
             attr_flags: self.attr_flags,
@@ -383,7 +435,7 @@ impl SceneWriter {
             materials_off,
             materials_bytes: mat_bytes.len() as u64,
             material_count: materials.len() as u32,
-            reserved0: 0,
+            lod_part_count: self.lods.len() as u32,
             meta_checksum: xxhash_rust::xxh3::xxh3_64(&meta),
             reserved: [0; 13],
             header_checksum: 0,

@@ -30,7 +30,7 @@ fn write_scene(path: &Path) {
     let bx = Aabb { min: [0.0, 0.0, 0.0], max: [4.0, 1.0, 0.0] };
     let mut top = Node8::EMPTY;
     top.set(0, &bx, BlobRef::part(0).0);
-    let mut w = SceneWriter::create(path, vec![top], 1, 1, 1 << 16).unwrap();
+    let mut w = SceneWriter::create(path, vec![top], 1, 1, 0, 1 << 16).unwrap();
     let mut root = Node8::EMPTY;
     root.set(0, &bx, BlobRef::leaf(0, 1).0);
     root.set(1, &bx, BlobRef::inner(1).0);

@@ -9,6 +9,7 @@ use std::cell::RefCell;
 
 use crate::boxes::{RayBox, W};
 use crate::isa::{Isa, GENERIC};
+use crate::lod::LodRay;
 use crate::tracer::{Entry, Step, Tracer, STACK, TOP};
 use crate::tri::{lanes, RayTri4};
 use crate::walk::{Event, Found, Walk};
@@ -128,21 +129,34 @@ impl<'s> Tracer<'s> {
     /// The single-ray kernel on this tracer's instruction set (see [`Tracer::walk`]), `pad`
     /// as in [`Tracer::trace_padded`] (0 but in tests).
     pub(crate) fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>, pad: usize) -> Traced {
+        self.traverse_with(ray, any, from, pad, None)
+    }
+
+    /// [`Tracer::traverse`] choosing levels of detail by `lod` where the ray enters a part
+    /// ([`Tracer::lod_entry`]).
+    pub(crate) fn traverse_with(
+        &self,
+        ray: &Ray,
+        any: bool,
+        from: Option<Pending>,
+        pad: usize,
+        lod: Option<&LodRay>,
+    ) -> Traced {
         #[cfg(target_arch = "x86_64")]
         match self.isa {
             // `isa` is one that the CPU reported (`Isa::detect`, `Isa::available`). The
             // same kernel on both, compiled for each ([`walk_avx512`]).
             Isa::Avx2 | Isa::Avx512 => {
                 return match any {
-                    true => self.traverse_in::<true, true>(ray, from, pad),
-                    false => self.traverse_in::<true, false>(ray, from, pad),
+                    true => self.traverse_in::<true, true>(ray, from, pad, lod),
+                    false => self.traverse_in::<true, false>(ray, from, pad, lod),
                 };
             }
             Isa::Baseline => {}
         }
         match any {
-            true => self.traverse_in::<false, true>(ray, from, pad),
-            false => self.traverse_in::<false, false>(ray, from, pad),
+            true => self.traverse_in::<false, true>(ray, from, pad, lod),
+            false => self.traverse_in::<false, false>(ray, from, pad, lod),
         }
     }
 
@@ -156,12 +170,13 @@ impl<'s> Tracer<'s> {
         ray: &Ray,
         from: Option<Pending>,
         pad: usize,
+        lod: Option<&LodRay>,
     ) -> Traced {
         stats::count(|s| s.rays += 1);
         SCRATCH.with(|cell| match cell.try_borrow_mut() {
-            Ok(mut scratch) => self.drive::<AVX, ANY>(ray, from, pad, &mut scratch),
+            Ok(mut scratch) => self.drive::<AVX, ANY>(ray, from, pad, &mut scratch, lod),
             // Taken (never, since traversals do not nest, but a fresh one is as good).
-            Err(_) => self.drive::<AVX, ANY>(ray, from, pad, &mut Scratch::fresh()),
+            Err(_) => self.drive::<AVX, ANY>(ray, from, pad, &mut Scratch::fresh(), lod),
         })
     }
 
@@ -198,12 +213,12 @@ impl<'s> Tracer<'s> {
         if self.isa != Isa::Baseline {
             return match self.walk_on::<true, ANY>(&mut w, ray) {
                 Event::Empty | Event::Hit => w.best,
-                ev => self.drive_rare::<true, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR).expect(UNPAGED),
+                ev => self.drive_rare::<true, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR, None).expect(UNPAGED),
             };
         }
         match self.walk_on::<false, ANY>(&mut w, ray) {
             Event::Empty | Event::Hit => w.best,
-            ev => self.drive_rare::<false, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR).expect(UNPAGED),
+            ev => self.drive_rare::<false, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR, None).expect(UNPAGED),
         }
     }
 
@@ -216,15 +231,19 @@ impl<'s> Tracer<'s> {
         from: Option<Pending>,
         pad: usize,
         scratch: &mut Scratch,
+        lod: Option<&LodRay>,
     ) -> Traced {
         let mut w = Walk::new(scratch, self.root, ray.t_max);
         if from.is_none() && pad == 0 {
             match self.walk_on::<AVX, ANY>(&mut w, ray) {
                 Event::Empty | Event::Hit => Traced::Done(self.hit_of(w.best)),
-                ev => self.traced(self.drive_rare::<AVX, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR), NO_PRIOR),
+                ev => {
+                    let r = self.drive_rare::<AVX, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR, lod);
+                    self.traced(r, NO_PRIOR)
+                }
             }
         } else {
-            self.drive_from::<AVX, ANY>(ray, &mut w, from, pad)
+            self.drive_from::<AVX, ANY>(ray, &mut w, from, pad, lod)
         }
     }
 
@@ -236,6 +255,7 @@ impl<'s> Tracer<'s> {
         w: &mut Walk<'_>,
         from: Option<Pending>,
         pad: usize,
+        lod: Option<&LodRay>,
     ) -> Traced {
         let mut spill = Vec::new();
         let mut prior = NO_PRIOR;
@@ -254,7 +274,7 @@ impl<'s> Tracer<'s> {
             w.fixed[..w.sp].fill(empty);
             spill.resize(pad - w.sp, empty);
         }
-        self.traced(self.drive_rare::<AVX, ANY>(ray, w, spill, None, prior), prior)
+        self.traced(self.drive_rare::<AVX, ANY>(ray, w, spill, None, prior, lod), prior)
     }
 
     /// The public form of the driver's outcome.
@@ -287,6 +307,7 @@ impl<'s> Tracer<'s> {
         mut spill: Vec<Entry>,
         mut first: Option<Event>,
         prior: Prior,
+        lod: Option<&LodRay>,
     ) -> Result<Option<Found>, Box<Pending>> {
         loop {
             let ev = match first.take() {
@@ -315,7 +336,14 @@ impl<'s> Tracer<'s> {
                     w.fixed.copy_within(n..w.sp, 0);
                     w.sp -= n;
                 }
-                Event::Enter(arr) => match self.enter(&mut w.c, arr) {
+                Event::Enter(arr) => match {
+                    // Into a part from the top-level tree: at the level of detail `lod` chooses.
+                    let arr = match lod {
+                        Some(l) => self.lod_entry(w, arr, ray, l),
+                        None => arr,
+                    };
+                    self.enter(&mut w.c, arr)
+                } {
                     Ok(()) => {}
                     Err(Step::Missing(tile)) => {
                         spill.extend_from_slice(&w.fixed[..w.sp]);
@@ -451,7 +479,7 @@ impl<'s> Tracer<'s> {
         mut w: Walk<'_>,
         ev: Event,
     ) -> Option<Found> {
-        self.drive_rare::<AVX, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR).expect(UNPAGED)
+        self.drive_rare::<AVX, ANY>(ray, &mut w, Vec::new(), Some(ev), NO_PRIOR, None).expect(UNPAGED)
     }
 
     /// Whether `ray` misses the scene's box (its origin outside it, and its segment not

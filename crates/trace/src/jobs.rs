@@ -29,7 +29,7 @@ use std::time::{Duration, Instant};
 use megaray_base::Ray;
 use megaray_scene::Scene;
 
-use crate::{Hit, Pending, RayCaster, Suspended, Traced, Tracer};
+use crate::{Hit, Pending, RayCaster, RayCone, Suspended, Traced, Tracer};
 
 /// The default cap on jobs parked at once (see the module documentation).
 pub const MAX_PARKED: usize = 1 << 8;
@@ -46,11 +46,16 @@ pub struct JobOptions {
     pub deadline: Option<Instant>,
     /// The most jobs parked at once (see the module documentation).
     pub max_parked: usize,
+    /// Rays with a level of detail ([`RayCaster::intersect_cone`]) that need a tile not
+    /// resident are answered by a coarser resident stand-in ([`Tracer::stand_in`]) instead
+    /// of suspending the job; the job's result is then marked approximate
+    /// ([`Replay::approx`]).
+    pub stand_in: bool,
 }
 
 impl Default for JobOptions {
     fn default() -> JobOptions {
-        JobOptions { chunk: 64, deadline: None, max_parked: MAX_PARKED }
+        JobOptions { chunk: 64, deadline: None, max_parked: MAX_PARKED, stand_in: false }
     }
 }
 
@@ -107,12 +112,23 @@ pub struct Replay<'t, 's> {
     cursor: usize,
     waiting: Option<u32>,
     rays: u64,
+    /// Answer rays with a level of detail from stand-ins rather than suspend
+    /// ([`JobOptions::stand_in`]).
+    stand_in: bool,
+    /// Some ray of this run of the job was answered by a stand-in for a missing tile.
+    approx: bool,
 }
 
 impl<'t, 's> Replay<'t, 's> {
     /// A caster with an empty log.
     pub fn new(tracer: &'t Tracer<'s>) -> Replay<'t, 's> {
-        Replay { tracer, log: Vec::new(), cursor: 0, waiting: None, rays: 0 }
+        Replay { tracer, log: Vec::new(), cursor: 0, waiting: None, rays: 0, stand_in: false, approx: false }
+    }
+
+    /// Whether some ray of the job's current run was answered by a stand-in for a tile that
+    /// was not resident ([`JobOptions::stand_in`]): its result is approximate.
+    pub fn approx(&self) -> bool {
+        self.approx
     }
 
     #[inline]
@@ -122,6 +138,23 @@ impl<'t, 's> Replay<'t, 's> {
         }
         self.cursor = 0;
         self.waiting = None;
+        self.approx = false;
+    }
+
+    /// A query of a ray with a footprint: from a stand-in where levels of detail apply and
+    /// the run allows it, else waiting for the tiles of the level its cone chooses.
+    fn query_cone(&mut self, ray: &Ray, any: bool, cone: &RayCone) -> Result<Option<Hit>, Suspended> {
+        if !self.tracer.lod_applies(cone) {
+            return self.query(ray, any, None);
+        }
+        if self.stand_in && self.tracer.pager().is_some() {
+            if let Ok(h) = self.tracer.stand_in(ray, any, cone) {
+                self.rays += 1;
+                self.approx |= h.approx;
+                return Ok(if any { h.hit.map(|_| HIT_ANY) } else { h.hit });
+            }
+        }
+        self.query(ray, any, Some(cone))
     }
 
     /// The tile whose residency covers `h`'s attributes, if its part has any.
@@ -134,13 +167,25 @@ impl<'t, 's> Replay<'t, 's> {
         }
     }
 
+    /// A query that may suspend (with a level of detail chosen by `cone`, if given), its
+    /// answers logged for the job's re-runs.
     #[inline]
-    fn query(&mut self, ray: &Ray, any: bool) -> Result<Option<Hit>, Suspended> {
+    fn query(&mut self, ray: &Ray, any: bool, cone: Option<&RayCone>) -> Result<Option<Hit>, Suspended> {
         if self.tracer.pager().is_none() {
             // Nothing can suspend: no log.
             self.rays += 1;
-            return Ok(if any { self.tracer.occluded(ray).then_some(HIT_ANY) } else { self.tracer.intersect(ray) });
+            return Ok(match cone {
+                Some(c) => self.tracer.trace_cone(ray, any, c).map(|h| if any { HIT_ANY } else { h }),
+                None if any => self.tracer.occluded(ray).then_some(HIT_ANY),
+                None => self.tracer.intersect(ray),
+            });
         }
+        let tracer = self.tracer;
+        let fresh = |ray: &Ray| match cone {
+            Some(c) => tracer.try_cone(ray, any, c, None),
+            None if any => tracer.try_occluded(ray),
+            None => tracer.try_intersect(ray),
+        };
         let traced = if self.cursor < self.log.len() {
             let same = |r: &Ray| r.org == ray.org && r.dir == ray.dir && r.t_min == ray.t_min && r.t_max == ray.t_max;
             match &self.log[self.cursor] {
@@ -168,26 +213,21 @@ impl<'t, 's> Replay<'t, 's> {
                     let Logged::Pending(_, p) = self.log.swap_remove(self.cursor) else { unreachable!() };
                     // swap_remove moved the last entry here; the pending one was the last
                     // (a job stops at its first pending ray), so nothing moved.
-                    self.tracer.resume(ray, p)
+                    match cone {
+                        Some(c) => self.tracer.try_cone(ray, any, c, Some(p)),
+                        None => self.tracer.resume(ray, p),
+                    }
                 }
                 _ => {
                     // The job fired a different ray than last time: forget the rest.
                     self.log.truncate(self.cursor);
                     self.rays += 1;
-                    if any {
-                        self.tracer.try_occluded(ray)
-                    } else {
-                        self.tracer.try_intersect(ray)
-                    }
+                    fresh(ray)
                 }
             }
         } else {
             self.rays += 1;
-            if any {
-                self.tracer.try_occluded(ray)
-            } else {
-                self.tracer.try_intersect(ray)
-            }
+            fresh(ray)
         };
         self.log.truncate(self.cursor);
         match traced {
@@ -213,10 +253,16 @@ impl RayCaster for Replay<'_, '_> {
         self.tracer.scene()
     }
     fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended> {
-        self.query(ray, false)
+        self.query(ray, false, None)
     }
     fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended> {
-        self.query(ray, true).map(|h| h.is_some())
+        self.query(ray, true, None).map(|h| h.is_some())
+    }
+    fn intersect_cone(&mut self, ray: &Ray, cone: &RayCone) -> Result<Option<Hit>, Suspended> {
+        self.query_cone(ray, false, cone)
+    }
+    fn occluded_cone(&mut self, ray: &Ray, cone: &RayCone) -> Result<bool, Suspended> {
+        self.query_cone(ray, true, cone).map(|h| h.is_some())
     }
 }
 
@@ -281,6 +327,7 @@ where
     // could run two loops one after the other on one thread).
     let per_thread: Vec<Vec<(u32, T)>> = rayon::broadcast(|_| {
         let mut replay = Replay::new(tracer);
+        replay.stand_in = opts.stand_in;
         let mut out: Vec<(u32, T)> = Vec::with_capacity(n / threads + chunk);
         let mut to_park: Vec<(u32, Parked)> = Vec::new();
         let mut seen_arrivals = u64::MAX;

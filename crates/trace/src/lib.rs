@@ -32,6 +32,7 @@
 //! | `walk.rs` | the single-ray kernel's hot loop and its per-instruction-set builds |
 //! | `boxes.rs` | the box test of a node's eight children ([`Node8`](megaray_scene::Node8)) |
 //! | `tri.rs` | triangle blocks and the 4- and 8-wide watertight tests |
+//! | `lod.rs` | the level of detail chosen per ray ([`RayCone`], [`LodHit`]) |
 //! | `asm.rs`, `walk_avx2.s` | the hand-written AVX2 kernel for incoherent rays (x86-64 Linux) |
 //! | [`packet`] | 16 coherent rays at once |
 //! | [`jobs`] | work that suspends on missing tiles and resumes (ray reordering) |
@@ -43,6 +44,7 @@ mod boxes;
 mod driver;
 pub mod isa;
 pub mod jobs;
+mod lod;
 pub mod packet;
 pub mod stats;
 mod tracer;
@@ -50,6 +52,7 @@ mod tri;
 mod walk;
 
 pub use isa::{Isa, Kernels};
+pub use lod::{Cone, LodHit, RayCone};
 pub use tracer::Tracer;
 
 use megaray_base::{Ray, Vec3};
@@ -100,9 +103,20 @@ pub trait RayCaster {
     fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended>;
     /// Whether anything lies on `ray` in `[ray.t_min, ray.t_max)`.
     fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended>;
+    /// [`RayCaster::intersect`] of a ray whose footprint is `cone`: a caster that traces
+    /// levels of detail chooses by it ([`Tracer::with_lod_error`]). By default, full detail.
+    fn intersect_cone(&mut self, ray: &Ray, cone: &RayCone) -> Result<Option<Hit>, Suspended> {
+        let _ = cone;
+        self.intersect(ray)
+    }
+    /// [`RayCaster::occluded`] of a ray whose footprint is `cone`.
+    fn occluded_cone(&mut self, ray: &Ray, cone: &RayCone) -> Result<bool, Suspended> {
+        let _ = cone;
+        self.occluded(ray)
+    }
 }
 
-/// A plain tracer answers every ray at once.
+/// A plain tracer answers every ray at once (a paged one waits for its tiles).
 impl RayCaster for &Tracer<'_> {
     fn scene(&self) -> &Scene {
         self.scene
@@ -112,6 +126,12 @@ impl RayCaster for &Tracer<'_> {
     }
     fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended> {
         Ok(Tracer::occluded(self, ray))
+    }
+    fn intersect_cone(&mut self, ray: &Ray, cone: &RayCone) -> Result<Option<Hit>, Suspended> {
+        Ok(self.trace_cone(ray, false, cone))
+    }
+    fn occluded_cone(&mut self, ray: &Ray, cone: &RayCone) -> Result<bool, Suspended> {
+        Ok(self.trace_cone(ray, true, cone).is_some())
     }
 }
 

@@ -109,6 +109,9 @@ pub struct Tracer<'s> {
     pub(crate) asm_stack: usize,
     /// What [`Tracer::with_kernels`] was asked for.
     pub(crate) choice: Kernels,
+    /// The level-of-detail error allowed, in footprints, as `f32` bits
+    /// ([`Tracer::with_lod_error`]); 0: full detail.
+    pub(crate) lod_px: std::sync::atomic::AtomicU32,
 }
 
 impl<'s> Tracer<'s> {
@@ -141,6 +144,7 @@ impl<'s> Tracer<'s> {
             asm: Tracer::asm_kernel(&k, all_checked),
             asm_stack: k.asm_stack.clamp(1, STACK - W),
             choice: k,
+            lod_px: std::sync::atomic::AtomicU32::new(0),
             root: match scene.parts() {
                 // The part's root, as the top-level tree links to it (in range: checked by
                 // `Scene::open`).
@@ -178,7 +182,13 @@ impl<'s> Tracer<'s> {
 
     /// This tracer reading through `pager` ([`Tracer::paged`]).
     fn with_pager(self, pager: &'s Pager) -> Tracer<'s> {
-        Tracer { pager: Some(pager), checked: CheckedTiles::NONE, ..self }
+        Tracer { pager: Some(pager), ..self.stopping_at_every_tile() }
+    }
+
+    /// This tracer with no tile counted as checked: every crossing into a tile returns to
+    /// the driver ([`Tracer::enter`]).
+    pub(crate) fn stopping_at_every_tile(self) -> Tracer<'s> {
+        Tracer { checked: CheckedTiles::NONE, ..self }
     }
 
     /// The pager, for a paged tracer.
