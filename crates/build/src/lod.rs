@@ -2,18 +2,20 @@
 //! the seed's tutorial suggests for triangle soups; Rossignac and Borrel 1993). Level 1
 //! clusters the part's vertices into cubic cells of a few mean edge lengths and keeps each
 //! triangle whose corners fall in three different cells, its corners moved to their cells'
-//! mean vertex (duplicates made so kept once). What collapses would vanish (a pipe thinner
+//! mean vertex (duplicates made so kept once); cells that would not halve the triangles are
+//! doubled first. What collapses would vanish (a pipe thinner
 //! than a cell, a bolt smaller than one), so it is stood in for by a thin prism or a small
 //! octahedron of about its width: a view of a plant from afar is mostly such things, and
 //! their coverage of the pixels is the picture. Level `k + 1` clusters level `k` in cells
 //! twice as large, until a level is small ([`LodOptions::min_tris`]) or stops shrinking.
 //!
 //! **Error.** A level's triangle is the image of some input triangle whose corners each moved
-//! within their cell, so every point of it lies within the cell's diagonal (`sqrt(3)` times
-//! the cell size) of that input triangle; a prism's or octahedron's axis or centre lies so,
-//! and its surface within its radius more. Level `k`'s error is the sum over levels `1..=k`
-//! of the diagonal plus the largest radius: every point of a level-`k` triangle lies within
-//! it of the part's own triangles, and it grows from level to level. The renderer uses a level only where this
+//! (within their cell) to a representative, so every point of it lies within the largest of
+//! those three moves of that input triangle (an affine combination moves no more than its
+//! corners); a prism's axis or an octahedron's centre likewise, and its surface within its
+//! radius more. The build measures these per triangle: a level's reach is the largest, and
+//! level `k`'s error the sum of the reaches of levels `1..=k`. Every point of a level-`k`
+//! triangle lies within it of the part's own triangles, and it grows from level to level. The renderer uses a level only where this
 //! error is below the footprint of a pixel (`render --lod-error`).
 
 use std::collections::{HashMap, HashSet};
@@ -26,7 +28,12 @@ pub struct LodOptions {
     pub first_cell: f32,
     /// Stop after a level of at most this many triangles (it is the coarsest).
     pub min_tris: usize,
-    /// Stop when a level keeps more than this fraction of the level before it.
+    /// The finest level keeps at most this fraction of the part's triangles (so that the
+    /// levels together stay a small part of the file); cells that would keep more are
+    /// doubled until they do not (a dense mesh's finest level starts coarser than a thin one's).
+    pub first_keep: f32,
+    /// Each coarser level keeps at most this fraction of the level before it (cells doubled
+    /// likewise).
     pub max_keep: f32,
     /// At most this many levels.
     pub max_levels: usize,
@@ -34,7 +41,7 @@ pub struct LodOptions {
 
 impl Default for LodOptions {
     fn default() -> Self {
-        LodOptions { first_cell: 3.0, min_tris: 2048, max_keep: 0.7, max_levels: 12 }
+        LodOptions { first_cell: 1.0, min_tris: 2048, first_keep: 0.125, max_keep: 0.5, max_levels: 12 }
     }
 }
 
@@ -61,20 +68,30 @@ pub fn levels(tris: &[[[f32; 3]; 3]], opts: &LodOptions) -> Vec<Level> {
         return out;
     }
     let mut error = 0.0f32;
+    let mut tries = 0;
     while out.len() < opts.max_levels {
         let (src_tris, src_ids): (&[[[f32; 3]; 3]], Option<&[u32]>) = match out.last() {
             None => (tris, None),
             Some(l) => (&l.tris, Some(&l.source)),
         };
-        let Some((lt, ls, radius)) = cluster(src_tris, cell) else { break };
-        // A kept triangle's points lie within a cell diagonal of the triangle it came from;
-        // a prism's or octahedron's within a diagonal plus its radius.
-        error += 3f32.sqrt() * cell + radius;
+        let Some((lt, ls, reach)) = cluster(src_tris, cell) else { break };
+        // Within `reach` of the level before, which was within `error` of the part.
+        error += reach;
         // The source triangle of the part, through the level before.
         let source: Vec<u32> = ls.iter().map(|&i| src_ids.map_or(i, |s| s[i as usize])).collect();
-        let shrank = (lt.len() as f32) <= opts.max_keep * src_tris.len() as f32;
-        if lt.is_empty() || !shrank {
+        if lt.is_empty() {
             break;
+        }
+        let keep = if out.is_empty() { opts.first_keep } else { opts.max_keep };
+        if (lt.len() as f32) > keep * src_tris.len() as f32 {
+            // Not worth a level (cells too small for this mesh): try cells twice as large.
+            error -= reach;
+            cell *= 2.0;
+            tries += 1;
+            if tries > opts.max_levels {
+                break;
+            }
+            continue;
         }
         let small = lt.len() <= opts.min_tris;
         out.push(Level { tris: lt, source, error });
@@ -101,6 +118,9 @@ fn mean_edge(tris: &[[[f32; 3]; 3]]) -> f32 {
     (sum / n.max(1) as f64) as f32
 }
 
+/// A triangle's corners.
+type Tri = [[f32; 3]; 3];
+
 /// A cell of the clustering grid: its integer coordinates, packed.
 type Cell = u64;
 
@@ -124,8 +144,8 @@ impl Moments {
     fn add(&mut self, p: [f32; 3]) {
         let p = p.map(|x| x as f64);
         self.n += 1;
-        for a in 0..3 {
-            self.s[a] += p[a];
+        for (s, x) in self.s.iter_mut().zip(p) {
+            *s += x;
         }
         let o = [p[0] * p[0], p[0] * p[1], p[0] * p[2], p[1] * p[1], p[1] * p[2], p[2] * p[2]];
         for (a, b) in self.ss.iter_mut().zip(o) {
@@ -160,9 +180,10 @@ impl Moments {
 /// thinner than a cell), its width the spread of the cells' vertices across it, and an
 /// octahedron in each cell that nothing else holds (a part smaller than a cell). Their radii
 /// are at most the cell size. For each output triangle, the index of an input triangle it
-/// stands for. `None` when the grid would need more than 2^21 cells along an axis.
-/// Also returns the largest radius used (0 without prisms or octahedra).
-fn cluster(tris: &[[[f32; 3]; 3]], cell: f32) -> Option<(Vec<[[f32; 3]; 3]>, Vec<u32>, f32)> {
+/// stands for; and how far the output reaches from the input: every point of an output
+/// triangle lies within it of its input triangle (measured, at most a cell diagonal plus a
+/// radius). `None` when the grid would need more than 2^21 cells along an axis.
+fn cluster(tris: &[Tri], cell: f32) -> Option<(Vec<Tri>, Vec<u32>, f32)> {
     let inv = 1.0 / cell;
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for p in tris.iter().flatten() {
@@ -171,7 +192,8 @@ fn cluster(tris: &[[[f32; 3]; 3]], cell: f32) -> Option<(Vec<[[f32; 3]; 3]>, Vec
             hi[a] = hi[a].max(p[a]);
         }
     }
-    if (0..3).any(|a| !((hi[a] - lo[a]) * inv < (1 << 21) as f32)) {
+    let fits = |a: usize| (hi[a] - lo[a]) * inv < (1 << 21) as f32;
+    if !(fits(0) && fits(1) && fits(2)) {
         return None;
     }
     let mut cells: HashMap<Cell, Moments, Fx> = HashMap::default();
@@ -184,6 +206,14 @@ fn cluster(tris: &[[[f32; 3]; 3]], cell: f32) -> Option<(Vec<[[f32; 3]; 3]>, Vec
         keys.push(k);
     }
     let rep = |c: Cell| -> [f32; 3] { cells[&c].mean().map(|x| x as f32) };
+    // The largest distance from a point of an output triangle to the input triangle it
+    // stands for (measured per triangle, below).
+    let mut reach = 0.0f32;
+    // A corner of input triangle `i` that lies in cell `c`.
+    let corner_in = |i: u32, c: Cell| -> [f32; 3] {
+        let j = (0..3).find(|&j| keys[i as usize][j] == c).expect("the triangle has a corner in the cell");
+        tris[i as usize][j]
+    };
     let mut seen: HashSet<[Cell; 3], Fx> = HashSet::default();
     // Cells and cell pairs the kept triangles hold.
     let mut held: HashSet<Cell, Fx> = HashSet::default();
@@ -202,6 +232,8 @@ fn cluster(tris: &[[[f32; 3]; 3]], cell: f32) -> Option<(Vec<[[f32; 3]; 3]>, Vec
         }
         let t = [rep(k[0]), rep(k[1]), rep(k[2])];
         if area2(&t) > 0.0 {
+            // Its points lie within the largest move of a corner of the triangle it came from.
+            reach = (0..3).map(|j| dist3(t[j], tris[i][j])).fold(reach, f32::max);
             out.push(t);
             source.push(i as u32);
             held.extend(k.iter().copied());
@@ -230,7 +262,6 @@ fn cluster(tris: &[[[f32; 3]; 3]], cell: f32) -> Option<(Vec<[[f32; 3]; 3]>, Vec
             thin.entry(e).or_insert(i as u32);
         }
     }
-    let mut radius = 0.0f32;
     let mut thin: Vec<_> = thin.into_iter().collect();
     thin.sort_unstable();
     for ((a, b), src) in thin {
@@ -250,7 +281,11 @@ fn cluster(tris: &[[[f32; 3]; 3]], cell: f32) -> Option<(Vec<[[f32; 3]; 3]>, Vec
         if rho <= 0.0 {
             continue;
         }
-        radius = radius.max(rho);
+        // The axis joins the two cells' representatives; the input triangle has an edge
+        // between a corner in each: the axis lies within the larger move of those corners
+        // of that edge, the prism's sides within `rho` more.
+        let ends = [(pa, corner_in(src, a)), (pb, corner_in(src, b))];
+        reach = ends.iter().map(|(r, p)| dist3(r.map(|x| x as f32), *p) + rho).fold(reach, f32::max);
         for t in prism(pa, pb, d, rho) {
             if area2(&t) > 0.0 {
                 out.push(t);
@@ -266,13 +301,19 @@ fn cluster(tris: &[[[f32; 3]; 3]], cell: f32) -> Option<(Vec<[[f32; 3]; 3]>, Vec
         if rho <= 0.0 {
             continue;
         }
-        radius = radius.max(rho);
+        // The input triangle lies in the cell: the octahedron within the move of its
+        // centre from a corner of it, plus `rho`.
+        reach = reach.max(dist3(m.mean().map(|x| x as f32), corner_in(src, c)) + rho);
         for t in octahedron(m.mean(), rho) {
             out.push(t);
             source.push(src);
         }
     }
-    Some((out, source, radius))
+    Some((out, source, reach))
+}
+
+fn dist3(a: [f32; 3], b: [f32; 3]) -> f32 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// A triangular prism of circumradius `rho` from `a` to `b` along unit `d` (its six sides).
@@ -474,30 +515,30 @@ mod tests {
         }
     }
 
-    /// Pipes thinner than a cell do not vanish: level 1 stands in for each with a prism
-    /// along it, so a ray across a pipe still hits it, at about its radius.
+    /// Pipes thinner than a cell do not vanish: every level finer than the pipes' spacing
+    /// stands in for each with a prism along it (or keeps it), so a ray across a pipe still
+    /// hits it, and one well beside it does not.
     #[test]
     fn thin_pipes_keep_their_coverage() {
         let tris = pipes_and_bolts();
         let lv = levels(&tris, &LodOptions { min_tris: 50, ..LodOptions::default() });
-        let l = &lv[0];
-        assert!(l.tris.len() * 4 < tris.len(), "level 1 keeps {} of {}", l.tris.len(), tris.len());
-        // Rays straight down (-z) across pipe 0 (y = 0, z = 0), every 0.5 along it and
-        // across y at the pipe's axis: all hit, as they hit the full pipe.
-        let hit = |org: [f32; 3]| {
-            let ray = megaray_base::Ray::new(org.into(), glam::Vec3::new(0.0, 0.0, -1.0));
-            l.tris.iter().any(|t| megaray_base::intersect_triangle(&ray, t.map(glam::Vec3::from), 10.0).is_some())
-        };
-        let hits = (1..28).filter(|&s| hit([s as f32 * 0.5 + 0.1, 0.0, 0.5])).count();
-        assert!(hits >= 25, "only {hits} of 27 rays across a pipe hit its level-1 stand-in");
-        // And well beside the pipe (4 radii away), nothing.
-        let far = (1..28).filter(|&s| hit([s as f32 * 0.5 + 0.1, 0.2, 0.5])).count();
-        assert_eq!(far, 0, "{far} rays beside the pipe hit its stand-in");
-    }
-
-    #[test]
-    fn small_parts_have_no_levels() {
-        assert!(levels(&terrain(10), &LodOptions::default()).is_empty());
-        assert!(levels(&[], &LodOptions::default()).is_empty());
+        assert!(lv.last().unwrap().tris.len() * 10 < tris.len(), "{} levels", lv.len());
+        // Levels whose error is below the pipes' spacing (0.7): coarser ones may merge them.
+        let fine: Vec<&Level> = lv.iter().filter(|l| l.error < 0.7).collect();
+        assert!(!fine.is_empty(), "no level finer than the pipes' spacing");
+        for (k, l) in fine.into_iter().enumerate() {
+            // Rays straight down (-z) onto pipe 0 (y = 0, z = 0), every 0.5 along it, and
+            // beside it (y = 0.2, four radii away).
+            let hit = |org: [f32; 3]| {
+                let ray = megaray_base::Ray::new(org.into(), glam::Vec3::new(0.0, 0.0, -1.0));
+                l.tris.iter().any(|t| megaray_base::intersect_triangle(&ray, t.map(glam::Vec3::from), 10.0).is_some())
+            };
+            let hits = (1..28).filter(|&s| hit([s as f32 * 0.5 + 0.1, 0.0, 0.5])).count();
+            assert!(hits >= 25, "level {}: only {hits} of 27 rays across a pipe hit it", k + 1);
+            if l.error < 0.15 {
+                let beside = (1..28).filter(|&s| hit([s as f32 * 0.5 + 0.1, 0.2, 0.5])).count();
+                assert_eq!(beside, 0, "level {}: {beside} rays beside the pipe hit it", k + 1);
+            }
+        }
     }
 }

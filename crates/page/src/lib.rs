@@ -246,13 +246,16 @@ fn costs(scene: &Scene) -> (Vec<u64>, u64) {
     (tiles, pinned)
 }
 
-/// The tiles always resident: those of the coarsest level of detail of each part that has
-/// levels of detail.
+/// The tiles always resident in a scene with levels of detail: those of the coarsest level of
+/// every part (the part itself where the build made none: it was small).
 fn pinned_tiles(scene: &Scene) -> impl Iterator<Item = u32> + '_ {
-    (0..scene.full_part_count()).filter_map(move |p| scene.lod_chain(p).skip(1).last()).flat_map(move |q| {
-        let e = &scene.parts()[q as usize];
-        e.first_tile..e.first_tile + e.tile_count
-    })
+    let lod = scene.header().lod_part_count > 0;
+    (0..scene.full_part_count()).filter(move |_| lod).filter_map(move |p| scene.lod_chain(p).last()).flat_map(
+        move |q| {
+            let e = &scene.parts()[q as usize];
+            e.first_tile..e.first_tile + e.tile_count
+        },
+    )
 }
 
 /// The largest tile that is not pinned (what the budget must have room for, twice).

@@ -9,10 +9,11 @@ use megaray_page::{Access, Pager, PagerOptions};
 use megaray_scene::Scene;
 use megaray_testkit::*;
 
-/// A generated plant of many small tiles, built into `dir/paged.mray`.
+/// A generated plant of many small tiles, built into `dir/paged.mray` (without levels of
+/// detail, whose coarsest tiles a pager pins: the tests of loads and evictions count tiles).
 fn scene_file(dir: &Path) -> PathBuf {
     let ply = gen(dir, "plant:60k");
-    let (path, s) = build(dir, &[ply], "paged", Some(20_000));
+    let (path, s) = build_without_lod(dir, &[ply], "paged", Some(20_000));
     assert!(s.tiles >= 20, "only {} tiles", s.tiles);
     path
 }
@@ -103,4 +104,36 @@ fn damaged_and_truncated_files_are_reported() {
     std::fs::OpenOptions::new().write(true).open(&path).unwrap().set_len(last_off).unwrap();
     assert_eq!(fetch(&pager, last), Access::Corrupt);
     assert_eq!(pager.stats().corrupt, 2);
+}
+
+/// With levels of detail, the coarsest level of every part (the part itself where it has
+/// none) is resident from the start, counted as pinned, and never evicted however small the
+/// budget; every other tile still loads.
+#[test]
+fn the_coarsest_levels_are_pinned() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = gen(dir.path(), "plant:120k");
+    let (path, s) = build(dir.path(), &[ply], "lod", Some(20_000));
+    assert!(s.lod_parts > 0);
+    let probe = Scene::open(&path).unwrap();
+    let coarsest: Vec<u32> = (0..probe.full_part_count()).map(|p| probe.lod_chain(p).last().unwrap()).collect();
+    let pinned: Vec<u32> = coarsest
+        .iter()
+        .flat_map(|&q| {
+            let e = probe.parts()[q as usize];
+            e.first_tile..e.first_tile + e.tile_count
+        })
+        .collect();
+    let budget = Pager::min_budget(&probe);
+    drop(probe);
+    let pager = Pager::open(&path, PagerOptions { budget, fetchers: 2 }).unwrap();
+    assert!(pinned.iter().all(|&t| pager.is_resident(t)), "a coarsest tile is not resident at the start");
+    let n = pager.scene().tiles().len() as u32;
+    for t in (0..n).filter(|t| !pinned.contains(t)) {
+        assert_eq!(fetch(&pager, t), Access::Ready, "tile {t}");
+    }
+    let st = pager.stats();
+    assert!(st.evicted > 0, "{st:?}");
+    assert!(pinned.iter().all(|&t| pager.is_resident(t)), "a coarsest tile was evicted");
+    assert!(st.pinned > 0 && st.peak_resident <= st.tile_budget, "{st:?}");
 }

@@ -30,14 +30,22 @@ pub fn gen(dir: &Path, spec: &str) -> PathBuf {
 /// Builds `inputs` into `dir/name.mray`, with at most `max_part` triangles a part and
 /// tiles of about 64 KiB (many tiles, so that links and paging are exercised).
 pub fn build(dir: &Path, inputs: &[PathBuf], name: &str, max_part: Option<u64>) -> (PathBuf, BuildSummary) {
+    build_with(dir, inputs, name, BuildOptions { max_part_tris: max_part, ..test_options() })
+}
+
+/// [`build`] without levels of detail.
+pub fn build_without_lod(dir: &Path, inputs: &[PathBuf], name: &str, max_part: Option<u64>) -> (PathBuf, BuildSummary) {
+    build_with(dir, inputs, name, BuildOptions { max_part_tris: max_part, lod: None, ..test_options() })
+}
+
+/// The options [`build`] starts from: 512 MiB, tiles of 64 KiB, two threads.
+pub fn test_options() -> BuildOptions {
+    BuildOptions { build_mem: 512 << 20, tile_target: 64 << 10, threads: 2, ..BuildOptions::default() }
+}
+
+/// Builds `inputs` into `dir/name.mray` with `opts`.
+pub fn build_with(dir: &Path, inputs: &[PathBuf], name: &str, opts: BuildOptions) -> (PathBuf, BuildSummary) {
     let out = dir.join(format!("{name}.mray"));
-    let opts = BuildOptions {
-        max_part_tris: max_part,
-        build_mem: 512 << 20,
-        tile_target: 64 << 10,
-        threads: 2,
-        ..BuildOptions::default()
-    };
     let s = build_scene(inputs, &out, &opts, &NoProgress).unwrap();
     (out, s)
 }

@@ -336,24 +336,24 @@ impl<'s> Tracer<'s> {
                     w.fixed.copy_within(n..w.sp, 0);
                     w.sp -= n;
                 }
-                Event::Enter(arr) => match {
+                Event::Enter(arr) => {
                     // Into a part from the top-level tree: at the level of detail `lod` chooses.
                     let arr = match lod {
                         Some(l) => self.lod_entry(w, arr, ray, l),
                         None => arr,
                     };
-                    self.enter(&mut w.c, arr)
-                } {
-                    Ok(()) => {}
-                    Err(Step::Missing(tile)) => {
-                        spill.extend_from_slice(&w.fixed[..w.sp]);
-                        spill.extend(w.next);
-                        let hit = self.hit_after(w.best, prior);
-                        return Err(Box::new(Pending { stack: spill, best: w.best, hit, any: ANY, tile }));
+                    match self.enter(&mut w.c, arr) {
+                        Ok(()) => {}
+                        Err(Step::Missing(tile)) => {
+                            spill.extend_from_slice(&w.fixed[..w.sp]);
+                            spill.extend(w.next);
+                            let hit = self.hit_after(w.best, prior);
+                            return Err(Box::new(Pending { stack: spill, best: w.best, hit, any: ANY, tile }));
+                        }
+                        // A corrupt tile: what needed it is skipped.
+                        Err(_) => w.next = None,
                     }
-                    // A corrupt tile: what needed it is skipped.
-                    Err(_) => w.next = None,
-                },
+                }
                 Event::Exact { unit, count } => {
                     // The rest of the leaf by the double-precision reference (which gives
                     // the fast test's results wherever that one decides).

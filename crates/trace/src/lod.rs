@@ -29,7 +29,7 @@ use megaray_scene::format::{ChildRef, NO_PART};
 
 use crate::boxes::RayBox;
 use crate::isa::Kernels;
-use crate::tracer::{Entry, Tracer, TOP};
+use crate::tracer::{Entry, Tracer};
 use crate::walk::Walk;
 use crate::{Hit, Pending, Traced};
 
@@ -231,14 +231,21 @@ impl<'s> Tracer<'s> {
     }
 
     /// Where a walk is about to enter a part from the top-level tree (`w.next` a link to the
-    /// root of full-detail part of tile `arr`): the level of detail `lod` chooses for it, the
-    /// link redirected to that level's root. Returns the tile to enter.
+    /// root of the full-detail part of tile `arr`): the level of detail `lod` chooses for it,
+    /// the link redirected to that level's root. Returns the tile to enter (`arr` for any
+    /// other crossing).
     pub(crate) fn lod_entry(&self, w: &mut Walk<'_>, arr: u32, ray: &Ray, lod: &LodRay) -> u32 {
         let Some(e) = w.next.as_mut() else { return arr };
         let parts = self.scene.parts();
         let Some(tile) = self.tiles.get(arr as usize) else { return arr };
         let p = &parts[tile.part as usize];
-        if e.arr != TOP || p.lod_level != 0 || p.lod_next == NO_PART {
+        if p.lod_level != 0 || p.lod_next == NO_PART {
+            return arr;
+        }
+        // A link to a part's root comes only from the top-level tree (whichever tile the walk
+        // had open when it popped the entry).
+        let root = self.tiles[p.root_tile as usize].node0() + p.root_node as u64;
+        if e.r != ChildRef::link(p.root_tile, root).0 {
             return arr;
         }
         let part = tile.part;
