@@ -119,16 +119,6 @@ impl RayBox {
         tn <= tf * BOX_EPS
     }
 
-    /// The distance at which the ray enters box `b` (its slab entry; negative when its
-    /// origin is inside; meaningless when it misses the box).
-    #[inline]
-    pub(crate) fn entry(&self, b: &megaray_base::Aabb) -> f32 {
-        let (o, inv) = (Vec3A::from_array(self.org), Vec3A::from_array(self.inv));
-        let lo = (Vec3A::from_array(b.min) - o) * inv;
-        let hi = (Vec3A::from_array(b.max) - o) * inv;
-        lo.min(hi).max_element()
-    }
-
     /// The triangle test's [`Splats`] (origin and `t_min` in four lanes) as the box test
     /// makes its own: with `AVX`, the low halves of the 8-wide splats of
     /// [`RayBox::test_avx2`], the same values, so that the compiler keeps one register each.

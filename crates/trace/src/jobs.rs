@@ -180,6 +180,11 @@ impl<'t, 's> Replay<'t, 's> {
                 None => self.tracer.intersect(ray),
             });
         }
+        if self.tracer.misses_bounds(ray) {
+            // Nothing to wait for, and the same answer when the job runs again: not logged.
+            self.rays += 1;
+            return Ok(None);
+        }
         let tracer = self.tracer;
         let fresh = |ray: &Ray| match cone {
             Some(c) => tracer.try_cone(ray, any, c, None),
@@ -299,12 +304,11 @@ where
     // Runs job `i` with `log` into `out`; parks it if it suspends. (Finished jobs are counted
     // into `done` by the caller, a batch at a time: one shared counter bumped per job costs
     // more than a cheap job.)
+    // (The caller holds a pin across a batch of attempts: one pin a job costs more than a
+    // cheap job; a batch never waits while pinned.)
     let attempt = |i: usize, log: Vec<Logged>, replay: &mut Replay, out: &mut Vec<(u32, T)>| {
         replay.restart(log);
-        let r = {
-            let _pin = pager.map(|p| p.pin());
-            job(i, replay)
-        };
+        let r = job(i, replay);
         match r {
             Ok(v) => {
                 out.push((i as u32, v));
@@ -373,6 +377,7 @@ where
             if ready.is_empty() && !crowded {
                 let start = next.fetch_add(chunk, SeqCst);
                 if start < n {
+                    let _pin = pager.map(|p| p.pin());
                     for i in start..(start + chunk).min(n) {
                         if let Some(p) = attempt(i, Vec::new(), &mut replay, &mut out) {
                             to_park.push(p);
@@ -401,6 +406,7 @@ where
                 wait_ns.fetch_add(t0.elapsed().as_nanos() as u64, Relaxed);
                 seen_arrivals = u64::MAX;
             }
+            let _pin = (!ready.is_empty()).then(|| pager.map(|p| p.pin()));
             for job in ready {
                 if let Some(p) = attempt(job.index, job.log, &mut replay, &mut out) {
                     to_park.push(p);

@@ -26,8 +26,8 @@ use std::sync::atomic::Ordering::Relaxed;
 use megaray_base::Ray;
 use megaray_page::Access;
 use megaray_scene::format::{ChildRef, NO_PART};
+use megaray_scene::Scene;
 
-use crate::boxes::RayBox;
 use crate::isa::Kernels;
 use crate::tracer::{Entry, Tracer};
 use crate::walk::Walk;
@@ -71,8 +71,10 @@ pub(crate) struct LodRay {
     cone: Cone,
     /// The error allowed, in footprints.
     pixels: f32,
-    /// Parts held to a level or coarser: (full-detail part, lowest level allowed).
-    floor: Vec<(u32, u32)>,
+    /// Parts held to a level or coarser: (full-detail part, lowest level allowed), the first
+    /// `floors` of them (no allocation per ray).
+    floor: [(u32, u32); FLOORS],
+    floors: usize,
     /// Pass over levels whose root tile is not resident (a stand-in answers), rather than
     /// enter them and wait.
     stand_in: bool,
@@ -80,19 +82,59 @@ pub(crate) struct LodRay {
     missed: Cell<bool>,
 }
 
+/// The most parts a ray holds to a coarser level at once.
+const FLOORS: usize = 8;
+
 impl LodRay {
     /// The lowest level allowed for full-detail part `part`.
     fn floor_of(&self, part: u32) -> u32 {
-        self.floor.iter().filter(|f| f.0 == part).map(|f| f.1).max().unwrap_or(0)
+        self.floor[..self.floors].iter().filter(|f| f.0 == part).map(|f| f.1).max().unwrap_or(0)
     }
 
-    /// Holds `part` to `level` or coarser.
-    fn hold(&mut self, part: u32, level: u32) {
-        match self.floor.iter_mut().find(|f| f.0 == part) {
-            Some(f) => f.1 = f.1.max(level),
-            None => self.floor.push((part, level)),
+    /// Holds `part` to `level` or coarser; `false` when the ray holds too many parts already.
+    fn hold(&mut self, part: u32, level: u32) -> bool {
+        if let Some(f) = self.floor[..self.floors].iter_mut().find(|f| f.0 == part) {
+            f.1 = f.1.max(level);
+            return true;
         }
+        if self.floors == FLOORS {
+            return false;
+        }
+        self.floor[self.floors] = (part, level);
+        self.floors += 1;
+        true
     }
+}
+
+/// A full-detail part's levels, finest (the part itself) first, as the tracer reads them
+/// where a ray enters the part ([`Tracer::lod_entry`]).
+#[derive(Clone, Debug)]
+pub(crate) struct LodLevels {
+    /// The part's box (the entry distance of a ray).
+    lo: [f32; 3],
+    hi: [f32; 3],
+    /// Per level: the link to its root (the finest's is what the top-level tree holds), its
+    /// root tile, its error.
+    levels: Vec<(u64, u32, f32)>,
+}
+
+/// The levels of every full-detail part of `scene` (indexed by part).
+pub(crate) fn lod_levels(scene: &Scene) -> Vec<LodLevels> {
+    let (parts, tiles) = (scene.parts(), scene.tiles());
+    (0..scene.full_part_count())
+        .map(|p| LodLevels {
+            lo: parts[p as usize].bounds.min,
+            hi: parts[p as usize].bounds.max,
+            levels: scene
+                .lod_chain(p)
+                .map(|q| {
+                    let e = &parts[q as usize];
+                    let root = tiles[e.root_tile as usize].node0() + e.root_node as u64;
+                    (ChildRef::link(e.root_tile, root).0, e.root_tile, e.lod_error)
+                })
+                .collect(),
+        })
+        .collect()
 }
 
 /// What a ray traced with a level of detail found.
@@ -111,11 +153,16 @@ impl<'s> Tracer<'s> {
     /// kernels follow links without stopping, and would trace full detail).
     pub fn with_lod_error(self, pixels: f32) -> Tracer<'s> {
         let has_lod = self.scene.header().lod_part_count > 0;
-        let t = if self.pager.is_none() && has_lod && pixels > 0.0 {
+        let mut t = if self.pager.is_none() && has_lod && pixels > 0.0 {
             Tracer::with_kernels(self.scene, Kernels { tile_checks: true, ..self.choice }).stopping_at_every_tile()
         } else {
             self
         };
+        // Levels are chosen only where every crossing stops in the driver (paged, or made so
+        // above); a tracer that crosses tiles inline traces full detail.
+        if has_lod && t.checked.is_none() {
+            t.lod = lod_levels(t.scene).into();
+        }
         t.set_lod_error(pixels);
         t
     }
@@ -140,13 +187,11 @@ impl<'s> Tracer<'s> {
     /// apply (an error of 0, a scene without them, a tracer that never stops at a tile).
     fn lod_ray(&self, c: &RayCone, stand_in: bool) -> Option<LodRay> {
         let pixels = self.lod_error();
-        if self.scene.header().lod_part_count == 0
-            || !self.checked.is_none()
-            || (pixels <= 0.0 && c.from_part.is_none())
-        {
+        if self.lod.is_empty() || (pixels <= 0.0 && c.from_part.is_none()) {
             return None;
         }
-        let mut l = LodRay { cone: c.cone, pixels, floor: Vec::new(), stand_in, missed: Cell::new(false) };
+        let mut l =
+            LodRay { cone: c.cone, pixels, floor: [(0, 0); FLOORS], floors: 0, stand_in, missed: Cell::new(false) };
         if let Some(p) = c.from_part.and_then(|p| self.scene.parts().get(p as usize)) {
             if p.lod_level > 0 {
                 l.hold(p.lod_of, p.lod_level);
@@ -220,10 +265,9 @@ impl<'s> Tracer<'s> {
                     // A tile inside the level taken is missing: again, that part one level
                     // coarser (the coarsest is pinned, so this ends).
                     let part = self.scene.parts()[self.tiles[p.tile() as usize].part as usize];
-                    if part.lod_next == NO_PART {
+                    if part.lod_next == NO_PART || !lod.hold(part.lod_of, part.lod_level + 1) {
                         return Err(p.tile());
                     }
-                    lod.hold(part.lod_of, part.lod_level + 1);
                     approx = true;
                 }
             }
@@ -236,53 +280,38 @@ impl<'s> Tracer<'s> {
     /// other crossing).
     pub(crate) fn lod_entry(&self, w: &mut Walk<'_>, arr: u32, ray: &Ray, lod: &LodRay) -> u32 {
         let Some(e) = w.next.as_mut() else { return arr };
-        let parts = self.scene.parts();
-        let Some(tile) = self.tiles.get(arr as usize) else { return arr };
-        let p = &parts[tile.part as usize];
-        if p.lod_level != 0 || p.lod_next == NO_PART {
-            return arr;
-        }
+        let Some(part) = self.tiles.get(arr as usize).map(|t| t.part) else { return arr };
+        let Some(lv) = self.lod.get(part as usize) else { return arr };
         // A link to a part's root comes only from the top-level tree (whichever tile the walk
         // had open when it popped the entry).
-        let root = self.tiles[p.root_tile as usize].node0() + p.root_node as u64;
-        if e.r != ChildRef::link(p.root_tile, root).0 {
+        if lv.levels.len() < 2 || e.r != lv.levels[0].0 {
             return arr;
         }
-        let part = tile.part;
-        // The footprint where the ray enters the part's box.
-        let rb = RayBox::new(ray);
-        let t_enter = rb.entry(&p.bounds).max(ray.t_min).max(0.0);
+        // The footprint where the ray enters the part's box (its slab entry).
+        let mut t_enter = ray.t_min.max(0.0);
+        for a in 0..3 {
+            let inv = 1.0 / ray.dir[a];
+            let (t0, t1) = ((lv.lo[a] - ray.org[a]) * inv, (lv.hi[a] - ray.org[a]) * inv);
+            let near = t0.min(t1);
+            if near > t_enter {
+                t_enter = near;
+            }
+        }
         let allowed = lod.pixels * lod.cone.at(t_enter);
-        let floor = lod.floor_of(part);
         // The coarsest level within the error allowed, but not finer than the floor.
-        let mut want = 0;
-        for (k, q) in self.scene.lod_chain(part).enumerate() {
-            if parts[q as usize].lod_error <= allowed {
-                want = k as u32;
+        let want = lv.levels.iter().rposition(|l| l.2 <= allowed).unwrap_or(0);
+        let want = want.max(lod.floor_of(part) as usize).min(lv.levels.len() - 1);
+        let mut chosen = want;
+        if let (Some(pg), true) = (self.pager, lod.stand_in) {
+            // The first level from `want` whose root is resident (a miss requests it: a later
+            // frame finds it); the coarsest always is.
+            while chosen + 1 < lv.levels.len() && pg.acquire(lv.levels[chosen].1) != Access::Ready {
+                lod.missed.set(true);
+                chosen += 1;
             }
         }
-        let want = want.max(floor);
-        let mut chosen = None;
-        for (k, q) in self.scene.lod_chain(part).enumerate() {
-            if (k as u32) < want {
-                continue;
-            }
-            chosen = Some(q);
-            let resident = match (self.pager, lod.stand_in) {
-                // (A miss requests the tile: a later frame finds it.)
-                (Some(pg), true) => pg.acquire(parts[q as usize].root_tile) == Access::Ready,
-                // Unpaged, or waiting for the tiles of the level chosen.
-                _ => true,
-            };
-            if resident {
-                break;
-            }
-            lod.missed.set(true);
-        }
-        let Some(q) = chosen else { return arr };
-        let qe = &parts[q as usize];
-        let root = self.tiles[qe.root_tile as usize].node0() + qe.root_node as u64;
-        *e = Entry { r: ChildRef::link(qe.root_tile, root).0, ..*e };
-        qe.root_tile
+        let (link, root_tile, _) = lv.levels[chosen];
+        *e = Entry { r: link, ..*e };
+        root_tile
     }
 }

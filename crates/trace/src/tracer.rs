@@ -112,6 +112,9 @@ pub struct Tracer<'s> {
     /// The level-of-detail error allowed, in footprints, as `f32` bits
     /// ([`Tracer::with_lod_error`]); 0: full detail.
     pub(crate) lod_px: std::sync::atomic::AtomicU32,
+    /// The levels of detail of each full-detail part, where this tracer chooses them
+    /// ([`Tracer::with_lod_error`]); empty: full detail always.
+    pub(crate) lod: std::sync::Arc<[crate::lod::LodLevels]>,
 }
 
 impl<'s> Tracer<'s> {
@@ -145,6 +148,7 @@ impl<'s> Tracer<'s> {
             asm_stack: k.asm_stack.clamp(1, STACK - W),
             choice: k,
             lod_px: std::sync::atomic::AtomicU32::new(0),
+            lod: std::sync::Arc::new([]),
             root: match scene.parts() {
                 // The part's root, as the top-level tree links to it (in range: checked by
                 // `Scene::open`).
