@@ -19,7 +19,10 @@ import OpenEXR
 def read(path):
     with OpenEXR.File(path) as f:
         ch = f.channels()
-        rgb = np.stack([ch[c].pixels.astype(np.float64) for c in ("R", "G", "B")], axis=-1)
+        if "RGB" in ch:
+            rgb = ch["RGB"].pixels.astype(np.float64)
+        else:
+            rgb = np.stack([ch[c].pixels.astype(np.float64) for c in ("R", "G", "B")], axis=-1)
         depth = next((ch[k].pixels for k in ch if k.endswith("Z")), None)
     return rgb, depth
 
@@ -37,6 +40,12 @@ def main():
         ha, hb = np.isfinite(ref[1]), np.isfinite(test[1])
         out["mask_differs_fraction"] = float((ha != hb).mean())
         out["hit_fraction"] = float(ha.mean())
+        # The same over the pixels that show the model in either image (the sky can dwarf
+        # it): the difference as a fraction of the model's mean pixel, the mask's share.
+        m = ha | hb
+        if m.any():
+            out["mad_fraction_model"] = float(np.abs(a - b)[m].mean() / max(a[m].mean(), 1e-12))
+            out["mask_differs_fraction_model"] = float((ha != hb)[m].mean())
     if "--png" in args:
         i = args.index("--png")
         import flip_evaluator as flip

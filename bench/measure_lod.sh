@@ -45,7 +45,7 @@ fr = [l for l in lines if "frame" in l]
 t = sorted(l["seconds"] for l in fr)
 med, p99 = t[len(t) // 2], t[min(len(t) - 1, round(0.99 * (len(t) - 1)))]
 print(f"frames {len(fr)}: median {med:.3f} s, p99 {p99:.3f} s (p99/median {p99 / med:.2f}); "
-      f"unfinished pixels {sum(l['unfinished'] for l in fr)}, approximate pixels {sum(l.get('approx_pixels', 0) for l in fr)}, "
+      f"black pixels {sum(l['black_pixels'] for l in fr)} (unfinished {sum(l['unfinished'] for l in fr)}, filled from neighbours {sum(l['filled_pixels'] for l in fr)}), approximate pixels {sum(l.get('approx_pixels', 0) for l in fr)}, "
       f"read {sum(l['read_bytes'] for l in fr) / 1e6:.0f} MB; lod error {min(l['lod_error'] for l in fr)}..{max(l['lod_error'] for l in fr)}")
 EOF
 

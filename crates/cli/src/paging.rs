@@ -184,7 +184,8 @@ pub fn orbit(
                     "frame": k, "seconds": secs, "read_bytes": read, "loaded_bytes": loaded,
                     "suspensions": f.jobs.suspended, "unfinished": f.jobs.unfinished,
                     "wait_seconds": f.jobs.wait_secs, "rays": f.rays,
-                    "lod_error": lod_error, "approx_pixels": approx,
+                    "lod_error": lod_error, "approx_pixels": approx, "filled_pixels": f.filled,
+                    "black_pixels": f.jobs.unfinished - f.filled,
                 })
             );
         }

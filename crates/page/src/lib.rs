@@ -545,6 +545,13 @@ impl Shared {
     }
 
     fn fetch_loop(&self) {
+        // Below the tracing threads: a load waits a little when the cores are busy, a frame
+        // against a deadline does not (its rays answered from stand-ins meanwhile).
+        #[cfg(target_os = "linux")]
+        // SAFETY: setpriority takes integers; 0 names the calling thread on Linux.
+        unsafe {
+            libc::setpriority(libc::PRIO_PROCESS, 0, 10);
+        }
         while let Some(t) = self.next_request() {
             let st = self.state[t as usize].load(SeqCst);
             if st & (AVAIL | CORRUPT) != 0 {

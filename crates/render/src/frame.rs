@@ -163,6 +163,9 @@ pub struct Frame {
     /// approximate; a later frame with the tile refines it): empty when none did. Only a
     /// frame with [`FrameOptions::stand_in`] has them.
     pub approx: Vec<bool>,
+    /// Pixels the deadline left that were filled from done neighbours (with
+    /// [`FrameOptions::stand_in`]; counted in [`Frame::approx`] and [`Frame::done`]).
+    pub filled: u64,
     /// Rays fired in the frame.
     pub rays: u64,
     /// What the frame loop did: pixels finished and not, suspensions, waiting.
@@ -180,6 +183,7 @@ impl Frame {
             albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
             done: Vec::new(),
             approx: Vec::new(),
+            filled: 0,
             rays: 0,
             jobs: JobStats::default(),
         }
@@ -226,6 +230,104 @@ fn tile_order(w: u32, h: u32) -> Vec<u32> {
     order
 }
 
+/// The positions within a 4x4 block in the order a frame against a deadline takes them: each
+/// group of passes halves the spacing of the pixels done (a Bayer order), so that whatever
+/// the deadline leaves is scattered and filled from done neighbours ([`fill_unfinished`]).
+const PASSES: [(u32, u32); 16] = [
+    (0, 0),
+    (2, 2),
+    (2, 0),
+    (0, 2),
+    (1, 1),
+    (3, 3),
+    (3, 1),
+    (1, 3),
+    (1, 0),
+    (3, 2),
+    (3, 0),
+    (1, 2),
+    (0, 1),
+    (2, 3),
+    (2, 1),
+    (0, 3),
+];
+
+/// Pixel indices for a frame against a deadline: 16 passes over the image ([`PASSES`]), each
+/// taking one pixel of every 4x4 block, tile by tile (a tile's 64 pixels of a pass are
+/// neighbours enough to trace coherently); tiles walked backward when `backward`.
+fn interleaved_order(w: u32, h: u32, backward: bool) -> Vec<u32> {
+    let mut tiles: Vec<(u32, u32)> =
+        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty))).collect();
+    if backward {
+        tiles.reverse();
+    }
+    let mut order = Vec::with_capacity((w * h) as usize);
+    for &(dx, dy) in &PASSES {
+        for &(tx, ty) in &tiles {
+            for y in (ty * TILE + dy..((ty + 1) * TILE).min(h)).step_by(4) {
+                for x in (tx * TILE + dx..((tx + 1) * TILE).min(w)).step_by(4) {
+                    order.push(y * w + x);
+                }
+            }
+        }
+    }
+    order
+}
+
+/// Fills each pixel of `f` not done from a done pixel nearby (the first of its 4x4 block in
+/// [`PASSES`] order, else of the blocks around it), marking it done and approximate
+/// ([`Frame::approx`]: a later frame replaces it). Returns how many it filled.
+fn fill_unfinished(f: &mut Frame) -> u64 {
+    let (w, h) = (f.image.width, f.image.height);
+    let n = (w * h) as usize;
+    if f.done.is_empty() {
+        return 0;
+    }
+    if f.approx.is_empty() {
+        f.approx = vec![false; n];
+    }
+    let was_done = f.done.clone();
+    let mut filled = 0;
+    for p in 0..n {
+        if was_done[p] {
+            continue;
+        }
+        let (x, y) = (p as u32 % w, p as u32 / w);
+        let (bx, by) = (x & !3, y & !3);
+        let mut from = None;
+        'search: for ring in 0..3i64 {
+            for oy in -ring..=ring {
+                for ox in -ring..=ring {
+                    if ox.abs().max(oy.abs()) != ring {
+                        continue;
+                    }
+                    let (cx, cy) = (bx as i64 + 4 * ox, by as i64 + 4 * oy);
+                    for &(dx, dy) in &PASSES {
+                        let (sx, sy) = (cx + dx as i64, cy + dy as i64);
+                        if sx >= 0 && sy >= 0 && (sx as u32) < w && (sy as u32) < h {
+                            let q = (sy as u32 * w + sx as u32) as usize;
+                            if was_done[q] {
+                                from = Some(q);
+                                break 'search;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if let Some(q) = from {
+            f.image.pixels[p] = f.image.pixels[q];
+            if !f.depth.is_empty() {
+                (f.depth[p], f.normal[p], f.albedo[p]) = (f.depth[q], f.normal[q], f.albedo[q]);
+            }
+            f.done[p] = true;
+            f.approx[p] = true;
+            filled += 1;
+        }
+    }
+    filled
+}
+
 /// Renders frame `frame` (sample positions and light subsets move on from frame to frame):
 /// [`Renderer::pixel`] for each pixel, in 32x32 tiles over the current rayon pool.
 /// With `settings.frame_deadline`, the frame ends that long after it started.
@@ -243,14 +345,23 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
         return render_in_core(r, tracer, frame);
     }
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
-    let mut order = tile_order(w, h);
     // Every other frame walks the pixels backward. When a frame needs more tiles than the
     // memory budget holds, walking them in the same order every time is the worst case of
     // least-recently-used eviction (each tile is evicted just before it is needed again);
-    // walking back starts with the tiles the last frame used last, still resident.
-    if r.passes.fetch_add(1, Ordering::Relaxed) % 2 == 1 {
-        order.reverse();
-    }
+    // walking back starts with the tiles the last frame used last, still resident. Against
+    // a deadline, the pixels go in interleaved passes (what is left is filled from
+    // neighbours), tiles walked back on alternate frames.
+    let backward = r.passes.fetch_add(1, Ordering::Relaxed) % 2 == 1;
+    let order = match opts.deadline {
+        Some(_) => interleaved_order(w, h, backward),
+        None => {
+            let mut order = tile_order(w, h);
+            if backward {
+                order.reverse();
+            }
+            order
+        }
+    };
     // Against a deadline, race through the pixels whose tiles are resident; without one,
     // keep the frame's accesses together (see `megaray_trace::jobs`).
     let max_parked = if opts.deadline.is_some() { jobs::MAX_PARKED_DEADLINE } else { jobs::MAX_PARKED };
@@ -309,6 +420,9 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
         f.done = vec![false; n];
         for p in finished {
             f.done[p as usize] = true;
+        }
+        if opts.stand_in {
+            f.filled = fill_unfinished(&mut f);
         }
     }
     f
