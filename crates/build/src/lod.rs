@@ -67,6 +67,16 @@ pub fn levels(tris: &[[[f32; 3]; 3]], opts: &LodOptions) -> Vec<Level> {
     if !(cell.is_finite() && cell > 0.0) {
         return out;
     }
+    // The finest level's cell, first tried on a sample: the triangles of the middle eighth
+    // of the part's box (a trial on the whole part costs as much as the level).
+    let sample = middle(tris);
+    while sample.len() >= 4 * opts.min_tris.max(256) {
+        match cluster(&sample, cell) {
+            Some((lt, _, _)) if lt.len() as f32 > opts.first_keep * sample.len() as f32 => cell *= 2.0,
+            _ => break,
+        }
+    }
+    drop(sample);
     let mut error = 0.0f32;
     let mut tries = 0;
     while out.len() < opts.max_levels {
@@ -103,6 +113,20 @@ pub fn levels(tris: &[[[f32; 3]; 3]], opts: &LodOptions) -> Vec<Level> {
     out
 }
 
+/// The triangles of `tris` whose first corner lies in the middle eighth of their box (half
+/// its extent on each axis, about its centre).
+fn middle(tris: &[Tri]) -> Vec<Tri> {
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for t in tris {
+        for a in 0..3 {
+            lo[a] = lo[a].min(t[0][a]);
+            hi[a] = hi[a].max(t[0][a]);
+        }
+    }
+    let inside = |p: &[f32; 3]| (0..3).all(|a| (p[a] - 0.5 * (lo[a] + hi[a])).abs() <= 0.25 * (hi[a] - lo[a]));
+    tris.iter().filter(|t| inside(&t[0])).copied().collect()
+}
+
 /// The mean edge length of `tris` (of at most 64K of them, evenly spread).
 fn mean_edge(tris: &[[[f32; 3]; 3]]) -> f32 {
     let step = (tris.len() / 65_536).max(1);
@@ -130,19 +154,22 @@ fn cell_of(p: [f32; 3], lo: [f32; 3], inv: f32) -> Cell {
     q(0) | (q(1) << 21) | (q(2) << 42)
 }
 
-/// What a cell gathers of the vertices that fall in it: their count, sum and sum of outer
-/// products, for their mean (the cell's representative) and spread.
+/// What a cell gathers of the vertices that fall in it: their count, and the sum and sum of
+/// outer products of their offsets from the cell's corner (small numbers: `f32` sums lose
+/// nothing that matters), for their mean (the cell's representative) and spread.
 #[derive(Clone, Copy, Default)]
 struct Moments {
     n: u32,
-    s: [f64; 3],
+    s: [f32; 3],
     /// xx, xy, xz, yy, yz, zz.
-    ss: [f64; 6],
+    ss: [f32; 6],
 }
 
+const _: () = assert!(std::mem::size_of::<Moments>() == 40);
+
 impl Moments {
+    /// Adds a vertex at offset `p` from the cell's corner.
     fn add(&mut self, p: [f32; 3]) {
-        let p = p.map(|x| x as f64);
         self.n += 1;
         for (s, x) in self.s.iter_mut().zip(p) {
             *s += x;
@@ -153,17 +180,18 @@ impl Moments {
         }
     }
 
-    fn mean(&self) -> [f64; 3] {
-        self.s.map(|x| x / self.n as f64)
+    /// The mean offset from the cell's corner.
+    fn mean_offset(&self) -> [f64; 3] {
+        self.s.map(|x| x as f64 / self.n as f64)
     }
 
     /// The spread of the vertices about their mean across direction `d` (unit): the sum of
     /// their variances in the two directions perpendicular to it (`R^2` for a ring of radius
     /// `R` about an axis along `d`); with `d` zero, the total variance.
     fn spread_across(&self, d: [f64; 3]) -> f64 {
-        let m = self.mean();
+        let m = self.mean_offset();
         let n = self.n as f64;
-        let c = |i: usize, a: usize, b: usize| self.ss[i] / n - m[a] * m[b];
+        let c = |i: usize, a: usize, b: usize| self.ss[i] as f64 / n - m[a] * m[b];
         let (xx, xy, xz, yy, yz, zz) = (c(0, 0, 0), c(1, 0, 1), c(2, 0, 2), c(3, 1, 1), c(4, 1, 2), c(5, 2, 2));
         let along = d[0] * d[0] * xx
             + d[1] * d[1] * yy
@@ -198,14 +226,27 @@ fn cluster(tris: &[Tri], cell: f32) -> Option<(Vec<Tri>, Vec<u32>, f32)> {
     }
     let mut cells: HashMap<Cell, Moments, Fx> = HashMap::default();
     let mut keys: Vec<[Cell; 3]> = Vec::with_capacity(tris.len());
+    // The corner of cell `c`.
+    let corner =
+        |c: Cell| -> [f64; 3] { [0, 21, 42].map(|sh| ((c >> sh) & ((1 << 21) - 1)) as f64).map(|q| q * cell as f64) };
+    let corner = |c: Cell| -> [f64; 3] {
+        let q = corner(c);
+        [lo[0] as f64 + q[0], lo[1] as f64 + q[1], lo[2] as f64 + q[2]]
+    };
     for t in tris {
         let k = t.map(|p| cell_of(p, lo, inv));
         for (p, c) in t.iter().zip(k) {
-            cells.entry(c).or_default().add(*p);
+            let o = corner(c);
+            cells.entry(c).or_default().add([0, 1, 2].map(|a| (p[a] as f64 - o[a]) as f32));
         }
         keys.push(k);
     }
-    let rep = |c: Cell| -> [f32; 3] { cells[&c].mean().map(|x| x as f32) };
+    // A cell's mean vertex.
+    let mean = |c: Cell| -> [f64; 3] {
+        let (o, m) = (corner(c), cells[&c].mean_offset());
+        [o[0] + m[0], o[1] + m[1], o[2] + m[2]]
+    };
+    let rep = |c: Cell| -> [f32; 3] { mean(c).map(|x| x as f32) };
     // The largest distance from a point of an output triangle to the input triangle it
     // stands for (measured per triangle, below).
     let mut reach = 0.0f32;
@@ -267,7 +308,7 @@ fn cluster(tris: &[Tri], cell: f32) -> Option<(Vec<Tri>, Vec<u32>, f32)> {
     for ((a, b), src) in thin {
         held.insert(a);
         held.insert(b);
-        let (pa, pb) = (cells[&a].mean(), cells[&b].mean());
+        let (pa, pb) = (mean(a), mean(b));
         let d = [pb[0] - pa[0], pb[1] - pa[1], pb[2] - pa[2]];
         let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         if len == 0.0 {
@@ -296,15 +337,14 @@ fn cluster(tris: &[Tri], cell: f32) -> Option<(Vec<Tri>, Vec<u32>, f32)> {
     let mut small: Vec<_> = small.into_iter().filter(|(c, _)| !held.contains(c)).collect();
     small.sort_unstable();
     for (c, src) in small {
-        let m = &cells[&c];
-        let rho = (m.spread_across([0.0; 3]).sqrt() as f32).min(0.5 * cell);
+        let rho = (cells[&c].spread_across([0.0; 3]).sqrt() as f32).min(0.5 * cell);
         if rho <= 0.0 {
             continue;
         }
         // The input triangle lies in the cell: the octahedron within the move of its
         // centre from a corner of it, plus `rho`.
-        reach = reach.max(dist3(m.mean().map(|x| x as f32), corner_in(src, c)) + rho);
-        for t in octahedron(m.mean(), rho) {
+        reach = reach.max(dist3(rep(c), corner_in(src, c)) + rho);
+        for t in octahedron(mean(c), rho) {
             out.push(t);
             source.push(src);
         }
@@ -371,8 +411,9 @@ fn area2(t: &[[f32; 3]; 3]) -> f32 {
     c[0] * c[0] + c[1] * c[1] + c[2] * c[2]
 }
 
-/// A fast hasher for cell keys (the multiply-rotate of rustc's FxHash): the clustering's
-/// maps take several lookups per triangle, and the standard SipHash would be most of its time.
+/// A fast hasher for cell keys (the multiply-rotate of rustc's FxHash, finished by a
+/// MurmurHash3 mix): the clustering's maps take several lookups per triangle, and the
+/// standard SipHash would be most of its time.
 #[derive(Default)]
 struct FxHasher(u64);
 
@@ -388,7 +429,13 @@ impl Hasher for FxHasher {
         self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
     }
     fn finish(&self) -> u64 {
-        self.0
+        // The product's low bits depend only on the key's low bits (one axis of a packed
+        // cell): fold the high bits down (MurmurHash3's finaliser), or one axis would choose
+        // the bucket and the others collide.
+        let mut h = self.0;
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^ (h >> 33)
     }
 }
 
