@@ -494,38 +494,6 @@ mod tests {
         t
     }
 
-    /// Distance from `p` to triangle `t` (Ericson's closest point on a triangle).
-    fn dist(p: [f32; 3], t: &[[f32; 3]; 3]) -> f32 {
-        use glam::Vec3;
-        let (p, a, b, c) = (Vec3::from(p), Vec3::from(t[0]), Vec3::from(t[1]), Vec3::from(t[2]));
-        let (ab, ac, ap) = (b - a, c - a, p - a);
-        let (d1, d2) = (ab.dot(ap), ac.dot(ap));
-        let q = if d1 <= 0.0 && d2 <= 0.0 {
-            a
-        } else {
-            let bp = p - b;
-            let (d3, d4) = (ab.dot(bp), ac.dot(bp));
-            let cp = p - c;
-            let (d5, d6) = (ab.dot(cp), ac.dot(cp));
-            let (vc, vb, va) = (d1 * d4 - d3 * d2, d5 * d2 - d1 * d6, d3 * d6 - d5 * d4);
-            if d3 >= 0.0 && d4 <= d3 {
-                b
-            } else if d6 >= 0.0 && d5 <= d6 {
-                c
-            } else if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-                a + ab * (d1 / (d1 - d3))
-            } else if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-                a + ac * (d2 / (d2 - d6))
-            } else if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-                b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
-            } else {
-                let den = 1.0 / (va + vb + vc);
-                a + ab * (vb * den) + ac * (vc * den)
-            }
-        };
-        (p - q).length()
-    }
-
     /// Levels shrink, their errors grow, and every sampled point of every level's triangles
     /// lies within the level's error of the part's own triangles (checked by brute force
     /// against all of them).
@@ -554,7 +522,10 @@ mod tests {
             for t in &l.tris {
                 for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (0.33, 0.33), (0.5, 0.25)] {
                     let p = [0, 1, 2].map(|a| t[0][a] + u * (t[1][a] - t[0][a]) + v * (t[2][a] - t[0][a]));
-                    let d = tris.iter().map(|s| dist(p, s)).fold(f32::INFINITY, f32::min);
+                    let d = tris
+                        .iter()
+                        .map(|s| megaray_testkit::point_triangle_distance(p, *s))
+                        .fold(f32::INFINITY, f32::min);
                     worst = worst.max(d);
                 }
             }

@@ -19,37 +19,6 @@ fn part_tris(scene: &Scene, p: u32) -> Vec<[Vec3; 3]> {
     out
 }
 
-/// The distance from `p` to triangle `t` (the closest point on it, Ericson 2004).
-fn dist(p: Vec3, [a, b, c]: [Vec3; 3]) -> f32 {
-    let (ab, ac, ap) = (b - a, c - a, p - a);
-    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return (p - a).length();
-    }
-    let bp = p - b;
-    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
-    if d3 >= 0.0 && d4 <= d3 {
-        return bp.length();
-    }
-    let cp = p - c;
-    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
-    if d6 >= 0.0 && d5 <= d6 {
-        return cp.length();
-    }
-    let (vc, vb, va) = (d1 * d4 - d3 * d2, d5 * d2 - d1 * d6, d3 * d6 - d5 * d4);
-    let q = if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        a + ab * (d1 / (d1 - d3))
-    } else if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        a + ac * (d2 / (d2 - d6))
-    } else if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
-    } else {
-        let den = 1.0 / (va + vb + vc);
-        a + ab * (vb * den) + ac * (vc * den)
-    };
-    (p - q).length()
-}
-
 /// Checks every level of detail of `scene`: sampled points of (a sample of) its triangles lie
 /// within its error of the full-detail part's triangles; errors grow along each chain.
 fn check(scene: &Scene, name: &str) {
@@ -70,7 +39,10 @@ fn check(scene: &Scene, name: &str) {
             for t in stand_in.iter().step_by(step) {
                 for (u, v) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0 / 3.0, 1.0 / 3.0), (0.5, 0.25)] {
                     let x = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
-                    let d = tris.iter().map(|&s| dist(x, s)).fold(f32::INFINITY, f32::min);
+                    let d = tris
+                        .iter()
+                        .map(|s| point_triangle_distance(x.into(), s.map(|v| v.into())))
+                        .fold(f32::INFINITY, f32::min);
                     worst = worst.max(d);
                 }
             }

@@ -809,6 +809,13 @@ pub struct DemoArgs {
     /// PNG exposure in stops (the sunlit white plant is brighter than 1 at 0).
     #[arg(long, value_name = "EV", default_value_t = -0.5, allow_hyphen_values = true)]
     exposure: f32,
+    /// The error allowed to levels of detail, in pixels (see `megaray render --help`).
+    #[arg(long, value_name = "PIXELS", default_value_t = 1.0)]
+    lod_error: f32,
+    /// Render without a memory budget (by default the demo pages its scene within a third of
+    /// the file's size, and far geometry comes from levels of detail).
+    #[arg(long, conflicts_with = "mem")]
+    no_budget: bool,
     #[command(flatten)]
     paging: crate::paging::PagingArgs,
 }
@@ -855,10 +862,27 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
         )?;
     }
     let png = dir.join("demo.png");
+    let mut paging = a.paging;
+    if paging.mem.is_none() && !a.no_budget {
+        // A model larger than its budget: a third of the file, or what the pager needs at
+        // least (the tables and the pinned coarsest levels of detail, two tiles).
+        let file = std::fs::metadata(&mray).map(|m| m.len()).unwrap_or(0);
+        let need = megaray_page::Pager::min_budget(&Scene::open(&mray)?);
+        paging.mem = Some((file / 3).max(need + (4 << 20)));
+    }
     eprintln!(
         "3/3 image: {}x{} under the procedural sky ({}), env shader, {} frames of 1 primary + {} light samples per pixel",
         a.res.0, a.res.1, a.sky, a.frames, a.light_samples
     );
+    if let Some(mem) = paging.mem {
+        eprintln!(
+            "    the scene paged within {} (its file is {}); levels of detail within {} pixel{}",
+            format_size(mem),
+            format_size(std::fs::metadata(&mray).map(|m| m.len()).unwrap_or(0)),
+            a.lod_error,
+            if a.lod_error == 1.0 { "" } else { "s" }
+        );
+    }
     let mut r = RenderArgs::new(mray, png.clone());
     r.res = a.res;
     r.cam_offset = Some(Vec3::new(0.35, 0.25, 0.45));
@@ -867,7 +891,8 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     r.frames = Some(a.frames.max(1));
     r.light_samples = a.light_samples;
     r.exposure = a.exposure;
-    r.paging = a.paging;
+    r.lod_error = a.lod_error;
+    r.paging = paging;
     render(r, bars)?;
     println!("{}", png.display());
     Ok(())

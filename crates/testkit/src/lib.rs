@@ -64,3 +64,36 @@ impl Rng {
         (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
     }
 }
+
+/// The distance from `p` to the triangle `[a, b, c]` (its closest point, Ericson 2004, 5.1.5).
+pub fn point_triangle_distance(p: [f32; 3], [a, b, c]: [[f32; 3]; 3]) -> f32 {
+    let v = |x: [f32; 3]| megaray_base::Vec3::from(x);
+    let (p, a, b, c) = (v(p), v(a), v(b), v(c));
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (p - a).length();
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return bp.length();
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return cp.length();
+    }
+    let (vc, vb, va) = (d1 * d4 - d3 * d2, d5 * d2 - d1 * d6, d3 * d6 - d5 * d4);
+    let q = if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        a + ab * (d1 / (d1 - d3))
+    } else if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        a + ac * (d2 / (d2 - d6))
+    } else if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)))
+    } else {
+        let den = 1.0 / (va + vb + vc);
+        a + ab * (vb * den) + ac * (vc * den)
+    };
+    (p - q).length()
+}
