@@ -25,6 +25,7 @@ mod geo;
 mod layout;
 mod objects;
 mod rng;
+mod unit;
 
 use crate::sink::Emitter;
 use crate::GenError;
