@@ -1,0 +1,401 @@
+//! The view core ([`ViewCore`]): a camera that keys, drags and the wheel move, and a frame
+//! loop that keeps up with them. While the camera moves, each frame is rendered at the
+//! resolution that fits the frame budget (adapted from frame to frame) and ends on time
+//! (rays whose tiles are not resident are answered by resident levels of detail); when it
+//! stops, frames accumulate at full resolution, progressively, and converge to the picture
+//! `megaray render` makes of the same pose. The display is an RGB8 image at the view's size,
+//! with the statistics line and the help drawn over it.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use megaray_base::Aabb;
+use megaray_render::{
+    render_frame_with, Accumulator, Builtin, Environment, FrameOptions, Image, ImageError, LodGovernor, RenderSettings,
+    Renderer, ToneMap,
+};
+use megaray_trace::Tracer;
+
+use crate::camera::{FlyCamera, Pose};
+use crate::input::{help_lines, Event, Key};
+use crate::overlay::draw_lines;
+
+/// How a view renders.
+#[derive(Clone)]
+pub struct ViewOptions {
+    /// The view's size in pixels (the window's, the page's canvas).
+    pub width: u32,
+    pub height: u32,
+    /// Vertical field of view, degrees.
+    pub fov: f32,
+    /// The shader the view starts with (C cycles through the built-ins).
+    pub shader: Builtin,
+    /// Shadow rays per hit toward the environment's lights.
+    pub light_samples: u32,
+    /// The sky: an environment light that K turns on and off, and whether it starts on.
+    pub sky: Option<Arc<Environment>>,
+    pub sky_on: bool,
+    /// The time a frame may take. While the camera moves, frames render at the resolution
+    /// that fits it; every frame ends at it (pixels left are filled from neighbours, rays
+    /// whose tiles are missing answered from levels of detail). `None`: every frame at full
+    /// resolution, exact (scripts and tests, whose frames must not depend on the machine).
+    pub frame_budget: Option<Duration>,
+    /// Frames accumulated at most while the camera stands still (then the view idles).
+    pub max_frames: u32,
+}
+
+impl ViewOptions {
+    /// A view of `width` x `height` with the defaults of `megaray render` (shader `auto`, 2
+    /// light samples, 60 degrees) and a budget of 100 ms a frame.
+    pub fn new(width: u32, height: u32) -> ViewOptions {
+        ViewOptions {
+            width,
+            height,
+            fov: 60.0,
+            shader: Builtin::Auto,
+            light_samples: 2,
+            sky: None,
+            sky_on: false,
+            frame_budget: Some(Duration::from_millis(100)),
+            max_frames: 1024,
+        }
+    }
+}
+
+/// What the last frames did, for the statistics line and `--json`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ViewStats {
+    /// Frames a second and millions of rays a second (smoothed over the last frames).
+    pub fps: f64,
+    pub mrays_s: f64,
+    /// The last frame's time, seconds.
+    pub frame_secs: f64,
+    /// The resolution the last frame was rendered at (lower than the view's while moving).
+    pub width: u32,
+    pub height: u32,
+    /// Frames accumulated at full resolution since the camera last moved.
+    pub frames: u32,
+    /// Scene bytes resident and the budget (0 without a pager).
+    pub resident: u64,
+    pub budget: u64,
+    /// Tiles asked for and not arrived yet.
+    pub in_flight: u64,
+    /// The level-of-detail error in force, pixels.
+    pub lod_error: f32,
+    /// Pixels of the last frame answered by stand-ins or filled from neighbours.
+    pub approx: u64,
+    /// Whether the camera moved for the last frame.
+    pub moving: bool,
+}
+
+/// An interactive view of a scene (see the module documentation).
+pub struct ViewCore<'t, 's> {
+    tracer: &'t Tracer<'s>,
+    pool: &'t rayon::ThreadPool,
+    bounds: Aabb,
+    opts: ViewOptions,
+    cam: FlyCamera,
+    home: FlyCamera,
+    held: Vec<Key>,
+    /// The camera moved (a drag, the wheel's speed does not count) since the last frame.
+    moved: bool,
+    shader: Builtin,
+    sky_on: bool,
+    renderer: Renderer,
+    acc: Accumulator,
+    /// The last frame rendered while moving, and its size.
+    preview: Option<Image>,
+    /// The fraction of the view's width and height rendered while moving.
+    scale: f32,
+    governor: LodGovernor,
+    display: Vec<u8>,
+    stats: ViewStats,
+    help: bool,
+    info: bool,
+    quit: bool,
+    screenshots: u32,
+}
+
+impl<'t, 's> ViewCore<'t, 's> {
+    /// A view of `tracer`'s scene from the default camera (as `megaray render` frames it),
+    /// rendering on `pool`.
+    pub fn new(tracer: &'t Tracer<'s>, pool: &'t rayon::ThreadPool, opts: ViewOptions) -> ViewCore<'t, 's> {
+        let bounds = tracer.scene().header().bounds;
+        let home = FlyCamera::home(&bounds, opts.fov);
+        let (w, h) = (opts.width.max(1), opts.height.max(1));
+        let mut v = ViewCore {
+            tracer,
+            pool,
+            bounds,
+            cam: home,
+            home,
+            held: Vec::new(),
+            moved: true,
+            shader: opts.shader,
+            sky_on: opts.sky_on && opts.sky.is_some(),
+            renderer: Renderer::new(RenderSettings::new(home.pose.camera(opts.fov, w, h)), &bounds),
+            acc: Accumulator::new(w, h),
+            preview: None,
+            scale: 0.5,
+            governor: LodGovernor::new(tracer),
+            display: vec![0; (3 * w * h) as usize],
+            stats: ViewStats::default(),
+            help: false,
+            info: true,
+            quit: false,
+            screenshots: 0,
+            opts: ViewOptions { width: w, height: h, ..opts },
+        };
+        v.rebuild_renderer();
+        v
+    }
+
+    /// The renderer for the current shader, sky and size.
+    fn rebuild_renderer(&mut self) {
+        let (w, h) = (self.opts.width, self.opts.height);
+        let mut s = RenderSettings::new(self.cam.pose.camera(self.opts.fov, w, h));
+        s.shader = self.shader;
+        s.light_samples = self.opts.light_samples;
+        s.stand_in = self.opts.frame_budget.is_some();
+        let r = Renderer::new(s, &self.bounds);
+        self.renderer = match (&self.opts.sky, self.sky_on) {
+            (Some(env), true) => r.with_environment(env.clone()),
+            _ => r,
+        };
+        self.acc = Accumulator::new(w, h);
+        self.moved = true;
+    }
+
+    /// Takes one input event.
+    pub fn handle(&mut self, ev: Event) {
+        match ev {
+            Event::Key(k, true) if k.is_action() => self.act(k),
+            Event::Key(k, true) => {
+                if !self.held.contains(&k) {
+                    self.held.push(k);
+                }
+            }
+            Event::Key(k, false) => self.held.retain(|&x| x != k),
+            Event::Drag(dx, dy) => {
+                if dx != 0.0 || dy != 0.0 {
+                    self.cam.look(dx, dy);
+                    self.moved = true;
+                }
+            }
+            Event::Wheel(n) => self.cam.wheel(n),
+            Event::Resize(w, h) => {
+                let (w, h) = (w.clamp(1, 16384), h.clamp(1, 16384));
+                if (w, h) != (self.opts.width, self.opts.height) {
+                    (self.opts.width, self.opts.height) = (w, h);
+                    self.display = vec![0; (3 * w * h) as usize];
+                    self.preview = None;
+                    self.rebuild_renderer();
+                }
+            }
+        }
+    }
+
+    fn act(&mut self, k: Key) {
+        match k {
+            Key::Reset => {
+                self.cam = FlyCamera { speed: self.cam.speed, ..self.home };
+                self.moved = true;
+            }
+            Key::Frame => {
+                self.cam.frame(&self.bounds);
+                self.moved = true;
+            }
+            Key::NextShader => {
+                let i = Builtin::ALL.iter().position(|b| b.1 == self.shader).unwrap_or(0);
+                self.shader = Builtin::ALL[(i + 1) % Builtin::ALL.len()].1;
+                self.rebuild_renderer();
+            }
+            Key::ToggleSky => {
+                if self.opts.sky.is_some() {
+                    self.sky_on = !self.sky_on;
+                    self.rebuild_renderer();
+                }
+            }
+            Key::Help => self.help = !self.help,
+            Key::Info => self.info = !self.info,
+            Key::Quit => self.quit = true,
+            // Screenshots are the front end's to write ([`ViewCore::save_screenshot`]).
+            _ => {}
+        }
+        self.compose();
+    }
+
+    /// Whether Escape was pressed.
+    pub fn quit_requested(&self) -> bool {
+        self.quit
+    }
+
+    /// The camera's pose now.
+    pub fn pose(&self) -> Pose {
+        self.cam.pose
+    }
+
+    /// The camera (pose, speed, field of view).
+    pub fn camera(&self) -> FlyCamera {
+        self.cam
+    }
+
+    /// Puts the camera at `cam` (a saved view).
+    pub fn set_camera(&mut self, cam: FlyCamera) {
+        self.cam = cam;
+        self.moved = true;
+    }
+
+    /// The shader in use.
+    pub fn shader(&self) -> Builtin {
+        self.shader
+    }
+
+    /// What the last frames did.
+    pub fn stats(&self) -> &ViewStats {
+        &self.stats
+    }
+
+    /// Advances `dt` seconds: the camera flies by the keys held, then a frame is rendered: at
+    /// a reduced resolution if the camera moved, else accumulated at full resolution (none
+    /// once [`ViewOptions::max_frames`] are). Returns whether a frame was rendered.
+    pub fn step(&mut self, dt: f32) -> bool {
+        if self.cam.fly(&self.held, dt) {
+            self.moved = true;
+        }
+        let moving = std::mem::replace(&mut self.moved, false);
+        if moving {
+            self.acc.reset();
+        } else if self.acc.frames() >= self.opts.max_frames {
+            return false;
+        }
+        let (w, h) = (self.opts.width, self.opts.height);
+        // While moving (and only with a budget): a reduced resolution.
+        let (rw, rh) = match (moving, self.opts.frame_budget) {
+            (true, Some(_)) => {
+                (((w as f32 * self.scale) as u32).max(8).min(w), ((h as f32 * self.scale) as u32).max(8).min(h))
+            }
+            _ => (w, h),
+        };
+        self.renderer.settings.camera = self.cam.pose.camera(self.opts.fov, rw, rh);
+        let t0 = Instant::now();
+        let opts = FrameOptions {
+            deadline: self.opts.frame_budget.map(|b| t0 + b),
+            stand_in: self.opts.frame_budget.is_some(),
+        };
+        let index = if moving { 0 } else { self.acc.frames() };
+        let frame = self.pool.install(|| render_frame_with(&self.renderer, self.tracer, index, &opts));
+        let secs = t0.elapsed().as_secs_f64().max(1e-6);
+        self.governor.after_frame(self.tracer);
+        if (rw, rh) == (w, h) {
+            self.acc.add_frame(&frame);
+            self.preview = None;
+        } else {
+            self.preview = Some(frame.image.clone());
+        }
+        if moving {
+            if let Some(b) = self.opts.frame_budget {
+                // The resolution whose frame takes about 70% of the budget (a frame's cost
+                // goes with its pixels), changed by at most a factor of 1.5 a frame.
+                let want = (0.7 * b.as_secs_f64() / secs).sqrt() as f32;
+                self.scale = (self.scale * want.clamp(0.67, 1.5)).clamp(0.15, 1.0);
+            }
+        }
+        let p = self.tracer.pager().map(|p| p.stats());
+        let smooth = |old: f64, new: f64| if old == 0.0 { new } else { 0.7 * old + 0.3 * new };
+        self.stats = ViewStats {
+            fps: smooth(self.stats.fps, 1.0 / secs),
+            mrays_s: smooth(self.stats.mrays_s, frame.rays as f64 / secs * 1e-6),
+            frame_secs: secs,
+            width: rw,
+            height: rh,
+            frames: self.acc.frames(),
+            resident: p.map_or(0, |s| s.resident + s.pinned),
+            budget: p.map_or(0, |s| s.tile_budget + s.pinned),
+            in_flight: p.map_or(0, |s| s.requested.saturating_sub(s.loaded + s.corrupt)),
+            lod_error: self.tracer.lod_error(),
+            approx: frame.approx.iter().filter(|&&a| a).count() as u64,
+            moving,
+        };
+        self.compose();
+        true
+    }
+
+    /// The picture shown now, before overlays: the accumulated frames, or the last preview
+    /// scaled to the view's size.
+    pub fn image(&self) -> Image {
+        match &self.preview {
+            Some(p) => upscale(p, self.opts.width, self.opts.height),
+            None => self.acc.image(),
+        }
+    }
+
+    /// Makes the display: the picture tone mapped, the statistics line and the help over it.
+    fn compose(&mut self) {
+        let (w, h) = (self.opts.width, self.opts.height);
+        self.display = self.image().to_srgb8_with(&ToneMap::default());
+        let mut lines = Vec::new();
+        if self.info {
+            lines.push(self.stats_line());
+        }
+        if self.help {
+            lines.extend(help_lines());
+        }
+        let scale = if w >= 1600 { 2 } else { 1 };
+        draw_lines(&mut self.display, w, h, &lines, scale);
+    }
+
+    /// The statistics line.
+    pub fn stats_line(&self) -> String {
+        let s = &self.stats;
+        let mut line = format!(
+            "{:.1} fps  {:.1} Mrays/s  {}x{}  {} frames  {}",
+            s.fps,
+            s.mrays_s,
+            s.width,
+            s.height,
+            s.frames,
+            self.shader.name()
+        );
+        if s.budget > 0 {
+            line += &format!(
+                "  {} / {} MiB  {} tiles in flight  lod {:.1} px",
+                s.resident >> 20,
+                s.budget >> 20,
+                s.in_flight,
+                s.lod_error
+            );
+        }
+        line + "  (H: help)"
+    }
+
+    /// The display: RGB8, the view's width x height, rows top first.
+    pub fn display(&self) -> (u32, u32, &[u8]) {
+        (self.opts.width, self.opts.height, &self.display)
+    }
+
+    /// Saves the picture (no overlays) as a PNG, tone mapped as `megaray render` does.
+    pub fn save_screenshot(&mut self, path: &Path) -> Result<(), ImageError> {
+        self.screenshots += 1;
+        self.image().save_png_with(path, &ToneMap::default())
+    }
+
+    /// Screenshots saved so far (to number the next one).
+    pub fn screenshots(&self) -> u32 {
+        self.screenshots
+    }
+}
+
+/// `img` scaled to `w` x `h` (nearest pixel).
+fn upscale(img: &Image, w: u32, h: u32) -> Image {
+    let mut out = Image::new(w, h);
+    for y in 0..h {
+        let sy = (y as u64 * img.height as u64 / h as u64) as u32;
+        for x in 0..w {
+            let sx = (x as u64 * img.width as u64 / w as u64) as u32;
+            out.pixels[(y * w + x) as usize] = img.pixels[(sy * img.width + sx) as usize];
+        }
+    }
+    out
+}
