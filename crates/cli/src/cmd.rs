@@ -45,7 +45,7 @@ fn parse_mem(s: &str) -> Result<u64, String> {
     parse_size(s)
 }
 
-fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+pub(crate) fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     let n = threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
     if n == 0 {
         bail!("--threads must be at least 1");
@@ -264,7 +264,8 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
 // ---------------------------------------------------------------------------------------
 #[derive(Args)]
 pub struct RenderArgs {
-    /// The scene file.
+    /// The scene file, or a model file (PLY, OBJ, STL, glTF/GLB), built into a scene first
+    /// (cached under ~/.cache/megaray/models, keyed by its content).
     scene: PathBuf,
     /// Output image: .png (tone-mapped sRGB) or .exr (linear float, with --aov layers).
     #[arg(short, long, value_name = "OUT.png|OUT.exr")]
@@ -351,6 +352,8 @@ pub struct RenderArgs {
     threads: Option<usize>,
     #[command(flatten)]
     paging: crate::paging::PagingArgs,
+    #[command(flatten)]
+    open: crate::open::OpenArgs,
     /// End each frame after MS milliseconds even if pixels wait for scene data (they are
     /// left to the next frames; with one frame they stay black and are counted). With levels
     /// of detail in the scene, rays that need a tile not yet resident are answered by a
@@ -406,6 +409,7 @@ impl RenderArgs {
             json: false,
             threads: None,
             paging: Default::default(),
+            open: crate::open::OpenArgs { no_cache: false, build_mem: 2 << 30 },
             deadline: None,
             lod_error: 1.0,
             orbit: None,
@@ -499,7 +503,8 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         Some(p) => Some(read_exr(p)?.0),
         None => None,
     };
-    let (scene, pager) = a.paging.open(&a.scene)?;
+    let opened = crate::open::scene_for(Some(&a.scene), &a.open, bars)?;
+    let (scene, pager) = a.paging.open(&opened.path)?;
     let b = scene.header().bounds;
     let (w, h) = a.res;
     let at = a.at.unwrap_or(b.center());
@@ -820,7 +825,7 @@ pub struct DemoArgs {
     paging: crate::paging::PagingArgs,
 }
 
-fn cache_dir(given: Option<PathBuf>) -> PathBuf {
+pub(crate) fn cache_dir(given: Option<PathBuf>) -> PathBuf {
     given.unwrap_or_else(|| {
         std::env::var_os("XDG_CACHE_HOME")
             .map(PathBuf::from)
@@ -830,37 +835,50 @@ fn cache_dir(given: Option<PathBuf>) -> PathBuf {
     })
 }
 
-pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
-    let dir = cache_dir(a.cache);
-    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create cache folder", dir.display()))?;
-    let spec: GenSpec = format!("plant:{}", a.tris).parse()?;
+/// The demo's plant (`plant:TRIS`) as a scene file in `dir`, generated and built out of core
+/// (within `build_mem`) unless cached there; says what it does on stderr, the steps numbered
+/// as the demo's.
+/// Builds `inputs` into `out` with the defaults of `megaray build` and `build_mem`.
+pub(crate) fn build_into(inputs: Vec<PathBuf>, out: &Path, build_mem: u64, bars: &dyn Progress) -> Result<()> {
+    build(
+        BuildArgs {
+            inputs,
+            out: out.to_path_buf(),
+            build_mem,
+            tile_size: 256 << 10,
+            threads: None,
+            quality: QualityArg::High,
+            no_lod: false,
+            json: false,
+        },
+        bars,
+    )
+}
+
+pub(crate) fn demo_scene(dir: &Path, tris: &str, build_mem: u64, bars: &dyn Progress) -> Result<PathBuf> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create cache folder", dir.display()))?;
+    let spec: GenSpec = format!("plant:{tris}").parse()?;
     let name = spec.name().replace(':', "-");
     let ply = dir.join(format!("{name}.ply"));
     let mray = dir.join(format!("{name}.mray"));
+    if Scene::open(&mray).is_ok() {
+        eprintln!("1/3 model, 2/3 scene: {} (cached)", mray.display());
+        return Ok(mray);
+    }
     if ply.exists() {
         eprintln!("1/3 model: {} (cached)", ply.display());
     } else {
         eprintln!("1/3 model: generating {} -> {}", spec.name(), ply.display());
         gen(GenArgs { spec: spec.name(), out: ply.clone(), seed: 1 }, bars)?;
     }
-    if Scene::open(&mray).is_ok() {
-        eprintln!("2/3 scene: {} (cached)", mray.display());
-    } else {
-        eprintln!("2/3 scene: building with --build-mem {} (out of core)", format_size(a.build_mem));
-        build(
-            BuildArgs {
-                inputs: vec![ply],
-                out: mray.clone(),
-                build_mem: a.build_mem,
-                tile_size: 256 << 10,
-                threads: None,
-                quality: QualityArg::High,
-                no_lod: false,
-                json: false,
-            },
-            bars,
-        )?;
-    }
+    eprintln!("2/3 scene: building with --build-mem {} (out of core)", format_size(build_mem));
+    build_into(vec![ply], &mray, build_mem, bars)?;
+    Ok(mray)
+}
+
+pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
+    let dir = cache_dir(a.cache);
+    let mray = demo_scene(&dir, &a.tris, a.build_mem, bars)?;
     let png = dir.join("demo.png");
     let mut paging = a.paging;
     if paging.mem.is_none() && !a.no_budget {

@@ -4,8 +4,10 @@
 
 mod bench;
 mod cmd;
+mod open;
 mod paging;
 mod progress;
+mod view;
 
 use clap::{Parser, Subcommand};
 
@@ -103,6 +105,18 @@ enum Command {
     /// figures). Quote ratios, not absolute figures.
     #[command(verbatim_doc_comment)]
     Bench(bench::BenchArgs),
+    /// Look around a scene (or a model file) in a window: fly with the keys, look with the
+    /// mouse; frames keep up while moving and sharpen when still
+    ///
+    /// The scene is paged within --mem if given (rays whose tiles are missing are answered by
+    /// levels of detail while they load). With no SCENE, the demo's plant.
+    ///
+    /// Examples:
+    ///   megaray view plant.mray --mem 2G
+    ///   megaray view model.glb
+    ///   megaray view plant.mray --script tour.txt --out frames/     # no window: replay and write frames
+    #[command(verbatim_doc_comment)]
+    View(view::ViewArgs),
 }
 
 fn main() {
@@ -119,6 +133,7 @@ fn main() {
         Command::Info(a) => cmd::info(a),
         Command::Demo(a) => cmd::demo(a, &bars),
         Command::Bench(a) => bench::bench(a, &bars),
+        Command::View(a) => view::view(a, &bars),
     };
     if let Err(e) = res {
         use megaray_base::Progress;

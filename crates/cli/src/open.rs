@@ -1,0 +1,95 @@
+//! What `render`, `view` and `serve` open: a scene file as it is; a model file (PLY, OBJ,
+//! STL, glTF/GLB) built out of core into a scene cached under `~/.cache/megaray/models`,
+//! keyed by the model's content and reused next time (`--no-cache`: built into a temporary
+//! folder, removed at exit); with no path (the viewers), the demo's plant.
+
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::Args;
+use megaray_base::{parse_size, Progress};
+use megaray_scene::{Scene, SceneErrorKind};
+
+/// The options of commands that open models as well as scenes.
+#[derive(Args, Clone, Debug, Default)]
+pub struct OpenArgs {
+    /// A model file given instead of a scene is built into a temporary scene (removed at
+    /// exit) rather than into the cache under ~/.cache/megaray/models.
+    #[arg(long)]
+    pub no_cache: bool,
+    /// Memory budget of that build (see `megaray build --build-mem`).
+    #[arg(long, value_name = "SIZE", default_value = "2G", value_parser = |s: &str| parse_size(s).map_err(|e| e.to_string()))]
+    pub build_mem: u64,
+}
+
+/// A scene file to open, and the temporary folder that holds it when it was built for this
+/// run only.
+pub struct Opened {
+    pub path: PathBuf,
+    _tmp: Option<tempfile::TempDir>,
+}
+
+/// The scene for `path` (see the module documentation).
+pub fn scene_for(path: Option<&Path>, o: &OpenArgs, bars: &dyn Progress) -> Result<Opened> {
+    let Some(path) = path else {
+        let dir = crate::cmd::cache_dir(None);
+        return Ok(Opened { path: crate::cmd::demo_scene(&dir, "3M", 192 << 20, bars)?, _tmp: None });
+    };
+    match Scene::open(path) {
+        Ok(_) => return Ok(Opened { path: path.to_path_buf(), _tmp: None }),
+        Err(e) if e.kind != SceneErrorKind::NotAScene || megaray_import::Format::detect(path).is_err() => {
+            return Err(e.into())
+        }
+        Err(_) => {}
+    }
+    // A model: built into the cache (or a temporary folder).
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let (dir, tmp) = if o.no_cache {
+        let t = tempfile::tempdir().context("cannot make a temporary folder")?;
+        (t.path().to_path_buf(), Some(t))
+    } else {
+        (crate::cmd::cache_dir(None).join("models"), None)
+    };
+    std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create the folder", dir.display()))?;
+    let key = content_key(path)?;
+    let out = dir.join(format!("{}-{key:016x}.mray", sanitize(&stem)));
+    if Scene::open(&out).is_ok() {
+        eprintln!("{}: the scene built from it before: {}", path.display(), out.display());
+    } else {
+        eprintln!("{}: building it into {}", path.display(), out.display());
+        crate::cmd::build_into(vec![path.to_path_buf()], &out, o.build_mem, bars)?;
+    }
+    Ok(Opened { path: out, _tmp: tmp })
+}
+
+/// A key for a model's content: XXH3-64 of its bytes and length, and the scene format
+/// version (a new format builds it anew). glTF's buffers in other files are not read: a
+/// changed `.bin` beside an unchanged `.gltf` is not seen (the cache can be cleared).
+fn content_key(path: &Path) -> Result<u64> {
+    let mut f = std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let mut h = xxhash_rust::xxh3::Xxh3::new();
+    let mut buf = vec![0u8; 1 << 20];
+    let mut len = 0u64;
+    loop {
+        let n = f.read(&mut buf).with_context(|| format!("{}: cannot read", path.display()))?;
+        if n == 0 {
+            break;
+        }
+        h.update(&buf[..n]);
+        len += n as u64;
+    }
+    h.update(&len.to_le_bytes());
+    h.update(&megaray_scene::format::VERSION.to_le_bytes());
+    Ok(h.digest())
+}
+
+/// `name` with anything but letters, digits, `-` and `_` made `_` (a file name of our own).
+fn sanitize(name: &str) -> String {
+    let s: String = name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+    if s.is_empty() {
+        "model".into()
+    } else {
+        s
+    }
+}

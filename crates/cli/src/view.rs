@@ -1,0 +1,292 @@
+//! `megaray view`: a window over the view core (`megaray-view`), or, with `--script`, the same
+//! core driven by a recorded script with its frames written to a folder. Thin: keys and mouse
+//! become the core's events, its display goes to the window.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use megaray_render::{Builtin, EnvMap, Environment, SkySpec};
+use megaray_trace::Tracer;
+use megaray_view::{Event, Key, Script, Step, ViewCore, ViewOptions};
+use serde_json::json;
+
+use crate::progress::Bars;
+
+/// The controls, as `megaray view --help` lists them (kept equal to the core's help text by a
+/// test).
+pub const CONTROLS: &str = "\
+Controls:
+  W / Up     fly forward
+  S / Down   fly back
+  A / Left   fly left
+  D / Right  fly right
+  E          fly up
+  Q          fly down
+  drag       look around
+  wheel      flying speed
+  R          reset to the default view
+  F          frame the whole model
+  P          save a screenshot (PNG)
+  C          next shader
+  K          sky light on / off
+  H          this help
+  I          statistics line on / off
+  Esc        quit";
+
+/// What the viewers (`view`, `serve`) share: the scene, how it is lit and shaded, paging.
+#[derive(Args, Clone, Debug)]
+pub struct ViewerArgs {
+    /// The scene file, or a model file (PLY, OBJ, STL, glTF/GLB: built into a cached scene
+    /// first). None: the demo's plant (generated and built the first time).
+    pub scene: Option<PathBuf>,
+    /// Starting shader: normal, diffuse, phong, mirror, glass, ao, env, auto (C cycles them).
+    #[arg(long, default_value = "auto")]
+    pub shader: String,
+    /// An HDR environment map (.hdr, .exr) for the sky light (K turns it on and off; given, it
+    /// starts on).
+    #[arg(long, value_name = "FILE", conflicts_with = "sky")]
+    pub env: Option<PathBuf>,
+    /// A procedural sky for the sky light (see `megaray gen --help`); given, it starts on.
+    #[arg(long, value_name = "SPEC")]
+    pub sky: Option<String>,
+    /// The error allowed to levels of detail, in pixels (see `megaray render --help`).
+    #[arg(long, value_name = "PIXELS", default_value_t = 1.0)]
+    pub lod_error: f32,
+    /// The time a frame may take, milliseconds: while the camera moves the view renders at
+    /// the resolution that fits it; when it stops, frames accumulate at full resolution.
+    #[arg(long, value_name = "MS", default_value_t = 100)]
+    pub frame_budget: u64,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub paging: crate::paging::PagingArgs,
+    #[command(flatten)]
+    pub open: crate::open::OpenArgs,
+}
+
+/// The demo's sky, what K lights the scene with when no --env or --sky is given.
+const DEFAULT_SKY: &str = "sky:sun_elev=35,sun_azim=120,turbidity=3";
+
+impl ViewerArgs {
+    /// The view options for a `w` x `h` view: shader, sky, frame budget.
+    pub fn options(&self, w: u32, h: u32) -> Result<ViewOptions> {
+        let shader: Builtin = self.shader.parse().map_err(|e: String| anyhow::anyhow!("--shader: {e}"))?;
+        if !(self.lod_error >= 0.0 && self.lod_error.is_finite()) {
+            bail!("--lod-error must be a number of pixels, 0 or more");
+        }
+        if !(1..=10_000).contains(&self.frame_budget) {
+            bail!("--frame-budget must be 1..=10000 milliseconds");
+        }
+        let map = match (&self.env, &self.sky) {
+            (Some(p), _) => EnvMap::load(p)?,
+            (None, spec) => spec
+                .as_deref()
+                .unwrap_or(DEFAULT_SKY)
+                .parse::<SkySpec>()
+                .map_err(|e| anyhow::anyhow!("--sky: {e}"))?
+                .map(),
+        };
+        Ok(ViewOptions {
+            shader,
+            sky: Some(Arc::new(Environment::new(map, Environment::DEFAULT_LIGHTS, Environment::DEFAULT_SUBSETS))),
+            sky_on: self.env.is_some() || self.sky.is_some(),
+            frame_budget: Some(Duration::from_millis(self.frame_budget)),
+            ..ViewOptions::new(w, h)
+        })
+    }
+}
+
+/// `megaray view`.
+#[derive(Args)]
+#[command(after_help = CONTROLS)]
+pub struct ViewArgs {
+    #[command(flatten)]
+    pub viewer: ViewerArgs,
+    /// The window's size (it can be resized).
+    #[arg(long, value_name = "WxH", default_value = "960x720", value_parser = crate::cmd::parse_res)]
+    pub res: (u32, u32),
+    /// No window: replay this script of input (see below) and write every frame to --out.
+    /// Script lines: `frames N`, `key NAME down|up` (NAME: forward, back, left, right, up,
+    /// down, reset, frame, screenshot, nextshader, togglesky, help, info, quit), `drag DX DY`,
+    /// `wheel N`, `resize W H`; `#` starts a comment.
+    #[arg(long, value_name = "FILE", requires = "out")]
+    pub script: Option<PathBuf>,
+    /// The folder for --script's frames (frame-00001.png, ...) and frames.jsonl (the pose
+    /// and statistics of each).
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// With --script: the frames keep to --frame-budget as in the window (by default a
+    /// script's frames are exact, at full resolution, whatever the machine).
+    #[arg(long)]
+    pub budgeted: bool,
+}
+
+/// Maps a window key to the core's.
+fn key_of(k: minifb::Key) -> Option<Key> {
+    use minifb::Key as K;
+    Some(match k {
+        K::W | K::Up => Key::Forward,
+        K::S | K::Down => Key::Back,
+        K::A | K::Left => Key::Left,
+        K::D | K::Right => Key::Right,
+        K::E => Key::Up,
+        K::Q => Key::Down,
+        K::R => Key::Reset,
+        K::F => Key::Frame,
+        K::P => Key::Screenshot,
+        K::C => Key::NextShader,
+        K::K => Key::ToggleSky,
+        K::H => Key::Help,
+        K::I => Key::Info,
+        K::Escape => Key::Quit,
+        _ => return None,
+    })
+}
+
+pub fn view(a: ViewArgs, bars: &Bars) -> Result<()> {
+    let opened = crate::open::scene_for(a.viewer.scene.as_deref(), &a.viewer.open, bars)?;
+    let (scene, pager) = a.viewer.paging.open(&opened.path)?;
+    let tracer = match &pager {
+        Some(p) => Tracer::paged(p),
+        None => Tracer::new(&scene),
+    }
+    .with_lod_error(a.viewer.lod_error);
+    let pool = crate::cmd::pool(a.viewer.threads)?;
+    let mut opts = a.viewer.options(a.res.0, a.res.1)?;
+    let name = opened.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    if let Some(script) = &a.script {
+        if !a.budgeted {
+            opts.frame_budget = None;
+        }
+        let out = a.out.as_deref().expect("clap requires --out with --script");
+        return replay(&tracer, &pool, opts, script, out);
+    }
+    window(&tracer, &pool, opts, &name)
+}
+
+/// The window loop: input to the core, a step, the display to the window; P saves the picture
+/// beside the working folder, Escape or closing the window ends it.
+fn window(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, name: &str) -> Result<()> {
+    let (w, h) = (opts.width as usize, opts.height as usize);
+    let title = format!("megaray - {name}");
+    let mut win = minifb::Window::new(&title, w, h, minifb::WindowOptions { resize: true, ..Default::default() })
+        .map_err(|e| anyhow::anyhow!("cannot open a window ({e}); is DISPLAY set? (megaray serve shows the view in a browser)"))?;
+    let mut view = ViewCore::new(tracer, pool, opts);
+    let stem = name.trim_end_matches(".mray").to_string();
+    let mut mouse: Option<(f32, f32)> = None;
+    let mut buf: Vec<u32> = Vec::new();
+    let mut last = Instant::now();
+    eprintln!("{title}: H for help, Esc to quit");
+    while win.is_open() && !view.quit_requested() {
+        let (ww, wh) = win.get_size();
+        if ww > 0 && wh > 0 && (ww as u32, wh as u32) != (view.display().0, view.display().1) {
+            view.handle(Event::Resize(ww as u32, wh as u32));
+        }
+        // Keys: what went down and up since the last step (a tap between two steps too).
+        for k in win.get_keys_pressed(minifb::KeyRepeat::No) {
+            if let Some(key) = key_of(k) {
+                view.handle(Event::Key(key, true));
+                if key == Key::Screenshot {
+                    let path = PathBuf::from(format!("{stem}-{:03}.png", view.screenshots() + 1));
+                    match view.save_screenshot(&path) {
+                        Ok(()) => eprintln!("saved {}", path.display()),
+                        Err(e) => eprintln!("megaray: {e}"),
+                    }
+                }
+            }
+        }
+        for k in win.get_keys_released() {
+            if let Some(key) = key_of(k) {
+                view.handle(Event::Key(key, false));
+            }
+        }
+        // The mouse: a drag with the left button; the wheel.
+        let pos = win.get_mouse_pos(minifb::MouseMode::Pass);
+        if win.get_mouse_down(minifb::MouseButton::Left) {
+            if let (Some((x0, y0)), Some((x, y))) = (mouse, pos) {
+                view.handle(Event::Drag(x - x0, y - y0));
+            }
+            mouse = pos;
+        } else {
+            mouse = None;
+        }
+        if let Some((_, dy)) = win.get_scroll_wheel() {
+            if dy != 0.0 {
+                view.handle(Event::Wheel(dy.signum()));
+            }
+        }
+        let dt = last.elapsed().as_secs_f32().min(0.25);
+        last = Instant::now();
+        let rendered = view.step(dt);
+        let (dw, dh, rgb) = view.display();
+        buf.clear();
+        buf.extend(rgb.chunks_exact(3).map(|p| (p[0] as u32) << 16 | (p[1] as u32) << 8 | p[2] as u32));
+        win.update_with_buffer(&buf, dw as usize, dh as usize).context("cannot draw into the window")?;
+        if !rendered {
+            // Converged: nothing to render until something moves.
+            std::thread::sleep(Duration::from_millis(15));
+        }
+    }
+    Ok(())
+}
+
+/// `--script`: the script's events and frames, each frame's picture written to `out` and its
+/// pose and statistics to `out/frames.jsonl`; a screenshot key saves `out/screenshot-N.png`.
+fn replay(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, script: &Path, out: &Path) -> Result<()> {
+    let text = std::fs::read_to_string(script).with_context(|| format!("{}: cannot read", script.display()))?;
+    let script = Script::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", script.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
+    let mut view = ViewCore::new(tracer, pool, opts);
+    let mut log = String::new();
+    let mut n = 0u32;
+    for step in &script.steps {
+        match *step {
+            Step::Input(ev) => {
+                view.handle(ev);
+                if ev == Event::Key(Key::Screenshot, true) {
+                    let path = out.join(format!("screenshot-{}.png", view.screenshots() + 1));
+                    view.save_screenshot(&path)?;
+                }
+            }
+            Step::Frames(k) => {
+                for _ in 0..k {
+                    view.step(1.0 / 30.0);
+                    n += 1;
+                    view.image().save_png_with(&out.join(format!("frame-{n:05}.png")), &Default::default())?;
+                    let (p, s) = (view.pose(), view.stats());
+                    log += &json!({
+                        "frame": n, "eye": p.eye.to_array(), "yaw": p.yaw, "pitch": p.pitch,
+                        "width": s.width, "height": s.height, "accumulated": s.frames, "moving": s.moving,
+                        "seconds": s.frame_secs, "mrays_s": s.mrays_s, "shader": view.shader().name(),
+                        "resident_bytes": s.resident, "budget": s.budget, "tiles_in_flight": s.in_flight,
+                        "lod_error": s.lod_error, "approx_pixels": s.approx,
+                    })
+                    .to_string();
+                    log.push('\n');
+                }
+            }
+        }
+        if view.quit_requested() {
+            break;
+        }
+    }
+    let jsonl = out.join("frames.jsonl");
+    std::fs::write(&jsonl, log).with_context(|| format!("{}: cannot write", jsonl.display()))?;
+    eprintln!("{n} frames written to {}", out.display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    /// `megaray view --help` lists exactly the core's controls.
+    #[test]
+    fn the_help_lists_the_cores_controls() {
+        let want: Vec<String> = megaray_view::help_lines().iter().map(|l| format!("  {l}")).collect();
+        let got: Vec<&str> = super::CONTROLS.lines().skip(1).collect();
+        assert_eq!(got, want);
+    }
+}
