@@ -7,6 +7,7 @@ mod cmd;
 mod open;
 mod paging;
 mod progress;
+mod serve;
 mod view;
 
 use clap::{Parser, Subcommand};
@@ -117,6 +118,17 @@ enum Command {
     ///   megaray view plant.mray --script tour.txt --out frames/     # no window: replay and write frames
     #[command(verbatim_doc_comment)]
     View(view::ViewArgs),
+    /// Look around a scene from a web browser: serves one page whose canvas shows the view
+    /// and sends the keys and mouse back (the window's controls)
+    ///
+    /// Each page (tab) has its own camera over the one scene and budget. Listens on loopback
+    /// unless --bind says otherwise. With no SCENE, the demo's plant.
+    ///
+    /// Examples:
+    ///   megaray serve plant.mray --mem 2G              # then open http://127.0.0.1:8080/
+    ///   megaray serve model.glb --bind 0.0.0.0:8080    # other machines may view it
+    #[command(verbatim_doc_comment)]
+    Serve(serve::ServeArgs),
 }
 
 fn main() {
@@ -134,6 +146,7 @@ fn main() {
         Command::Demo(a) => cmd::demo(a, &bars),
         Command::Bench(a) => bench::bench(a, &bars),
         Command::View(a) => view::view(a, &bars),
+        Command::Serve(a) => serve::serve(a, &bars),
     };
     if let Err(e) = res {
         use megaray_base::Progress;
