@@ -86,7 +86,8 @@ fn content_key(path: &Path) -> Result<u64> {
 
 /// `name` with anything but letters, digits, `-` and `_` made `_` (a file name of our own).
 fn sanitize(name: &str) -> String {
-    let s: String = name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
+    let s: String =
+        name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect();
     if s.is_empty() {
         "model".into()
     } else {

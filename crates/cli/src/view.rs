@@ -55,13 +55,18 @@ pub struct ViewerArgs {
     /// The error allowed to levels of detail, in pixels (see `megaray render --help`).
     #[arg(long, value_name = "PIXELS", default_value_t = 1.0)]
     pub lod_error: f32,
-    /// The time a frame may take, milliseconds: while the camera moves the view renders at
-    /// the resolution that fits it; when it stops, frames accumulate at full resolution.
+    /// Milliseconds from input to the frame that shows it: while the camera moves the view
+    /// renders at the resolution that takes half of it; when it stops, frames of at most
+    /// half of it accumulate at full resolution.
     #[arg(long, value_name = "MS", default_value_t = 100)]
     pub frame_budget: u64,
     /// Worker threads (default: all cores).
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// Writes a line of JSON for every frame shown: when (`t`, seconds since 1970), the pose,
+    /// resolution, accumulated frames, seconds, Mrays/s, resident bytes, tiles in flight.
+    #[arg(long, value_name = "FILE")]
+    pub log: Option<PathBuf>,
     #[command(flatten)]
     pub paging: crate::paging::PagingArgs,
     #[command(flatten)]
@@ -163,62 +168,38 @@ pub fn view(a: ViewArgs, bars: &Bars) -> Result<()> {
             opts.frame_budget = None;
         }
         let out = a.out.as_deref().expect("clap requires --out with --script");
-        return replay(&tracer, &pool, opts, script, out);
+        return replay(&tracer, &pool, opts, script, out, FrameLog::create(a.viewer.log.as_deref())?);
     }
-    window(&tracer, &pool, opts, &name)
+    let log = FrameLog::create(a.viewer.log.as_deref())?;
+    window(&tracer, &pool, opts, &name, log)
 }
 
 /// The window loop: input to the core, a step, the display to the window; P saves the picture
 /// beside the working folder, Escape or closing the window ends it.
-fn window(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, name: &str) -> Result<()> {
+fn window(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, name: &str, mut log: FrameLog) -> Result<()> {
     let (w, h) = (opts.width as usize, opts.height as usize);
     let title = format!("megaray - {name}");
     let mut win = minifb::Window::new(&title, w, h, minifb::WindowOptions { resize: true, ..Default::default() })
-        .map_err(|e| anyhow::anyhow!("cannot open a window ({e}); is DISPLAY set? (megaray serve shows the view in a browser)"))?;
+        .map_err(|e| {
+            anyhow::anyhow!("cannot open a window ({e}); is DISPLAY set? (megaray serve shows the view in a browser)")
+        })?;
     let mut view = ViewCore::new(tracer, pool, opts);
     let stem = name.trim_end_matches(".mray").to_string();
     let mut mouse: Option<(f32, f32)> = None;
     let mut buf: Vec<u32> = Vec::new();
     let mut last = Instant::now();
+    let mut shown = 0u64;
     eprintln!("{title}: H for help, Esc to quit");
     while win.is_open() && !view.quit_requested() {
         let (ww, wh) = win.get_size();
         if ww > 0 && wh > 0 && (ww as u32, wh as u32) != (view.display().0, view.display().1) {
             view.handle(Event::Resize(ww as u32, wh as u32));
         }
-        // Keys: what went down and up since the last step (a tap between two steps too).
-        for k in win.get_keys_pressed(minifb::KeyRepeat::No) {
-            if let Some(key) = key_of(k) {
-                view.handle(Event::Key(key, true));
-                if key == Key::Screenshot {
-                    let path = PathBuf::from(format!("{stem}-{:03}.png", view.screenshots() + 1));
-                    match view.save_screenshot(&path) {
-                        Ok(()) => eprintln!("saved {}", path.display()),
-                        Err(e) => eprintln!("megaray: {e}"),
-                    }
-                }
-            }
-        }
-        for k in win.get_keys_released() {
-            if let Some(key) = key_of(k) {
-                view.handle(Event::Key(key, false));
-            }
-        }
-        // The mouse: a drag with the left button; the wheel.
-        let pos = win.get_mouse_pos(minifb::MouseMode::Pass);
-        if win.get_mouse_down(minifb::MouseButton::Left) {
-            if let (Some((x0, y0)), Some((x, y))) = (mouse, pos) {
-                view.handle(Event::Drag(x - x0, y - y0));
-            }
-            mouse = pos;
-        } else {
-            mouse = None;
-        }
-        if let Some((_, dy)) = win.get_scroll_wheel() {
-            if dy != 0.0 {
-                view.handle(Event::Wheel(dy.signum()));
-            }
-        }
+        // Input as late as it can be: the events that came while the last frame rendered.
+        // (Each update of the window keeps the key changes of its own events only: input is
+        // read after every one.)
+        win.update();
+        poll(&win, &mut view, &mut mouse, &stem);
         let dt = last.elapsed().as_secs_f32().min(0.25);
         last = Instant::now();
         let rendered = view.step(dt);
@@ -226,7 +207,11 @@ fn window(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, name: &s
         buf.clear();
         buf.extend(rgb.chunks_exact(3).map(|p| (p[0] as u32) << 16 | (p[1] as u32) << 8 | p[2] as u32));
         win.update_with_buffer(&buf, dw as usize, dh as usize).context("cannot draw into the window")?;
-        if !rendered {
+        poll(&win, &mut view, &mut mouse, &stem);
+        if rendered {
+            shown += 1;
+            log.write(&frame_line(&view, shown, None));
+        } else {
             // Converged: nothing to render until something moves.
             std::thread::sleep(Duration::from_millis(15));
         }
@@ -234,15 +219,99 @@ fn window(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, name: &s
     Ok(())
 }
 
+/// The window's input since its last update, to the core: keys that went down and up (a tap
+/// between two updates too), a drag with the left button, the wheel. P saves a screenshot
+/// `<stem>-NNN.png` in the working folder.
+fn poll(win: &minifb::Window, view: &mut ViewCore, mouse: &mut Option<(f32, f32)>, stem: &str) {
+    for k in win.get_keys_pressed(minifb::KeyRepeat::No) {
+        if let Some(key) = key_of(k) {
+            view.handle(Event::Key(key, true));
+            if key == Key::Screenshot {
+                let path = PathBuf::from(format!("{stem}-{:03}.png", view.screenshots() + 1));
+                match view.save_screenshot(&path) {
+                    Ok(()) => eprintln!("saved {}", path.display()),
+                    Err(e) => eprintln!("megaray: {e}"),
+                }
+            }
+        }
+    }
+    for k in win.get_keys_released() {
+        if let Some(key) = key_of(k) {
+            view.handle(Event::Key(key, false));
+        }
+    }
+    let pos = win.get_mouse_pos(minifb::MouseMode::Pass);
+    if win.get_mouse_down(minifb::MouseButton::Left) {
+        if let (Some((x0, y0)), Some((x, y))) = (*mouse, pos) {
+            view.handle(Event::Drag(x - x0, y - y0));
+        }
+        *mouse = pos;
+    } else {
+        *mouse = None;
+    }
+    if let Some((_, dy)) = win.get_scroll_wheel() {
+        if dy != 0.0 {
+            view.handle(Event::Wheel(dy.signum()));
+        }
+    }
+}
+
+/// One frame's line of `frames.jsonl` and `--log`: when it was shown (`t`, seconds since
+/// 1970), the pose, the frame's statistics; `client` numbers a page of `serve`.
+pub fn frame_line(view: &ViewCore, n: u64, client: Option<u64>) -> String {
+    let (p, s) = (view.pose(), view.stats());
+    let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64());
+    let mut v = json!({
+        "frame": n, "t": t, "eye": p.eye.to_array(), "yaw": p.yaw, "pitch": p.pitch,
+        "width": s.width, "height": s.height, "accumulated": s.frames, "moving": s.moving,
+        "seconds": s.frame_secs, "mrays_s": s.mrays_s, "rays": s.rays, "shader": view.shader().name(),
+        "resident_bytes": s.resident, "budget": s.budget, "tiles_in_flight": s.in_flight,
+        "lod_error": s.lod_error, "approx_pixels": s.approx,
+    });
+    if let Some(c) = client {
+        v["client"] = c.into();
+    }
+    v.to_string() + "\n"
+}
+
+/// A `--log` file: a line a frame shown, flushed as it goes.
+pub struct FrameLog(Option<std::io::BufWriter<std::fs::File>>);
+
+impl FrameLog {
+    pub fn create(path: Option<&Path>) -> Result<FrameLog> {
+        let Some(p) = path else { return Ok(FrameLog(None)) };
+        let f = std::fs::File::create(p).with_context(|| format!("{}: cannot create the log", p.display()))?;
+        Ok(FrameLog(Some(std::io::BufWriter::new(f))))
+    }
+
+    pub fn write(&mut self, line: &str) {
+        use std::io::Write;
+        if let Some(w) = &mut self.0 {
+            // A full disk ends the log, not the view.
+            if w.write_all(line.as_bytes()).and_then(|_| w.flush()).is_err() {
+                eprintln!("megaray: cannot write the frame log; it stops here");
+                self.0 = None;
+            }
+        }
+    }
+}
+
 /// `--script`: the script's events and frames, each frame's picture written to `out` and its
 /// pose and statistics to `out/frames.jsonl`; a screenshot key saves `out/screenshot-N.png`.
-fn replay(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, script: &Path, out: &Path) -> Result<()> {
+fn replay(
+    tracer: &Tracer,
+    pool: &rayon::ThreadPool,
+    opts: ViewOptions,
+    script: &Path,
+    out: &Path,
+    mut flog: FrameLog,
+) -> Result<()> {
     let text = std::fs::read_to_string(script).with_context(|| format!("{}: cannot read", script.display()))?;
     let script = Script::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", script.display()))?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
     let mut view = ViewCore::new(tracer, pool, opts);
     let mut log = String::new();
-    let mut n = 0u32;
+    let mut n = 0u64;
     for step in &script.steps {
         match *step {
             Step::Input(ev) => {
@@ -257,16 +326,9 @@ fn replay(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, script: 
                     view.step(1.0 / 30.0);
                     n += 1;
                     view.image().save_png_with(&out.join(format!("frame-{n:05}.png")), &Default::default())?;
-                    let (p, s) = (view.pose(), view.stats());
-                    log += &json!({
-                        "frame": n, "eye": p.eye.to_array(), "yaw": p.yaw, "pitch": p.pitch,
-                        "width": s.width, "height": s.height, "accumulated": s.frames, "moving": s.moving,
-                        "seconds": s.frame_secs, "mrays_s": s.mrays_s, "shader": view.shader().name(),
-                        "resident_bytes": s.resident, "budget": s.budget, "tiles_in_flight": s.in_flight,
-                        "lod_error": s.lod_error, "approx_pixels": s.approx,
-                    })
-                    .to_string();
-                    log.push('\n');
+                    let line = frame_line(&view, n, None);
+                    flog.write(&line);
+                    log += &line;
                 }
             }
         }

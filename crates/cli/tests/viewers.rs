@@ -27,7 +27,9 @@ fn scene(dir: &Path) -> PathBuf {
 fn have(tools: &[&str]) -> bool {
     let missing: Vec<&&str> = tools
         .iter()
-        .filter(|t| !Command::new("sh").arg("-c").arg(format!("command -v {t}")).output().is_ok_and(|o| o.status.success()))
+        .filter(|t| {
+            !Command::new("sh").arg("-c").arg(format!("command -v {t}")).output().is_ok_and(|o| o.status.success())
+        })
         .collect();
     if missing.is_empty() {
         return true;

@@ -6,6 +6,7 @@
 //! showing [`Accumulator::image`] after each. [`render_progressive`] does that loop until a
 //! frame count or a time is reached.
 
+use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
 use megaray_trace::jobs::JobStats;
@@ -58,7 +59,17 @@ impl Accumulator {
 
     /// Forgets every frame (the camera moved).
     pub fn reset(&mut self) {
-        *self = Accumulator::new(self.width, self.height);
+        // Cleared in place: a view resets on every moving frame, and fresh buffers cost their
+        // page faults again.
+        let (w, h) = (self.width, self.height);
+        let (mut counts, mut provisional) = (std::mem::take(&mut self.counts), std::mem::take(&mut self.provisional));
+        let (mut sum, mut lum_sq) = (std::mem::take(&mut self.sum), std::mem::take(&mut self.lum_sq));
+        counts.fill(0);
+        provisional.fill(false);
+        sum.fill([0.0; 3]);
+        lum_sq.fill(0.0);
+        *self = Accumulator { counts, provisional, sum, lum_sq, ..Accumulator::new(0, 0) };
+        (self.width, self.height) = (w, h);
     }
 
     /// Frames added since the last reset.
@@ -82,25 +93,37 @@ impl Accumulator {
             (self.width, self.height),
             "frame size differs from the accumulator's"
         );
-        for (i, ((s, q), p)) in self.sum.iter_mut().zip(&mut self.lum_sq).zip(&f.image.pixels).enumerate() {
-            if !f.is_done(i) {
-                continue;
-            }
-            let approx = f.is_approx(i);
-            if approx && self.counts[i] > 0 && !self.provisional[i] {
-                continue;
-            }
-            if !approx && self.provisional[i] {
-                (*s, *q, self.counts[i]) = ([0.0; 3], 0.0, 0);
-            }
-            self.provisional[i] = approx;
-            self.counts[i] += 1;
-            for k in 0..3 {
-                s[k] += p[k] as f64;
-            }
-            let l = luminance((*p).into()) as f64;
-            *q += l * l;
-        }
+        // In rows on the current thread pool (a view adds a frame every frame).
+        const ROW: usize = 4096;
+        let (counts, provisional) = (&mut self.counts, &mut self.provisional);
+        self.sum
+            .par_chunks_mut(ROW)
+            .zip(self.lum_sq.par_chunks_mut(ROW))
+            .zip(counts.par_chunks_mut(ROW).zip(provisional.par_chunks_mut(ROW)))
+            .enumerate()
+            .for_each(|(r, ((sum, lum_sq), (counts, provisional)))| {
+                for j in 0..sum.len() {
+                    let i = r * ROW + j;
+                    if !f.is_done(i) {
+                        continue;
+                    }
+                    let approx = f.is_approx(i);
+                    if approx && counts[j] > 0 && !provisional[j] {
+                        continue;
+                    }
+                    if !approx && provisional[j] {
+                        (sum[j], lum_sq[j], counts[j]) = ([0.0; 3], 0.0, 0);
+                    }
+                    provisional[j] = approx;
+                    counts[j] += 1;
+                    let p = f.image.pixels[i];
+                    for k in 0..3 {
+                        sum[j][k] += p[k] as f64;
+                    }
+                    let l = luminance(p.into()) as f64;
+                    lum_sq[j] += l * l;
+                }
+            });
         if !f.depth.is_empty() {
             if self.frames == 0 || self.depth.is_empty() {
                 self.depth = f.depth.clone();
@@ -134,7 +157,7 @@ impl Accumulator {
             height: self.height,
             pixels: self
                 .sum
-                .iter()
+                .par_iter()
                 .zip(&self.counts)
                 .map(|(s, &n)| {
                     let inv = 1.0 / n.max(1) as f64;

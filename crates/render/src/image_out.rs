@@ -59,12 +59,18 @@ pub struct ToneMap {
 impl ToneMap {
     /// The 8-bit sRGB value of linear `x`.
     pub fn map(&self, x: f32) -> u8 {
-        let x = x * self.exposure.exp2();
+        self.map_scaled(x, self.exposure.exp2())
+    }
+
+    /// [`ToneMap::map`] with the exposure's factor `scale` worked out once.
+    #[inline]
+    fn map_scaled(&self, x: f32, scale: f32) -> u8 {
+        let x = x * scale;
         let x = match self.curve {
             ToneCurve::Clamp => x,
             ToneCurve::Reinhard => x / (1.0 + x.max(0.0)),
         };
-        srgb(x)
+        srgb_by_table(x)
     }
 }
 
@@ -73,6 +79,40 @@ pub fn srgb(x: f32) -> u8 {
     let x = if x.is_nan() { 0.0 } else { x.clamp(0.0, 1.0) };
     let s = if x <= 0.003_130_8 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 };
     (s * 255.0 + 0.5) as u8
+}
+
+/// [`srgb`] by a table: for each code `k`, the least linear value that [`srgb`] takes to `k`
+/// or more, found by bisection over the floats in `[0, 1]`, so the table answers exactly as
+/// [`srgb`] does (which is monotonic) in 8 comparisons instead of a `powf`.
+pub fn srgb_by_table(x: f32) -> u8 {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    let t = TABLE.get_or_init(|| {
+        let mut t = [0.0f32; 256];
+        for (k, slot) in t.iter_mut().enumerate().skip(1) {
+            // The least bit pattern in [0, 1] whose code is k or more.
+            let (mut lo, mut hi) = (0u32, 1.0f32.to_bits());
+            while lo < hi {
+                let mid = lo + (hi - lo) / 2;
+                if srgb(f32::from_bits(mid)) as usize >= k {
+                    hi = mid;
+                } else {
+                    lo = mid + 1;
+                }
+            }
+            *slot = f32::from_bits(lo);
+        }
+        t
+    });
+    if x.is_nan() || x <= 0.0 {
+        return 0;
+    }
+    let mut k = 0usize;
+    for step in [128, 64, 32, 16, 8, 4, 2, 1] {
+        if t[k + step] <= x {
+            k += step;
+        }
+    }
+    k as u8
 }
 
 /// `.NAME.tmp-PID` beside `path`.
@@ -106,7 +146,18 @@ impl Image {
 
     /// 8-bit sRGB bytes after tone mapping `tm`.
     pub fn to_srgb8_with(&self, tm: &ToneMap) -> Vec<u8> {
-        self.pixels.iter().flat_map(|p| p.map(|c| tm.map(c))).collect()
+        use rayon::prelude::*;
+        let scale = tm.exposure.exp2();
+        let mut out = vec![0u8; self.pixels.len() * 3];
+        // In rows of pixels on the current thread pool: a view tone maps every frame.
+        out.par_chunks_mut(3 * 4096).zip(self.pixels.par_chunks(4096)).for_each(|(o, px)| {
+            for (o, p) in o.chunks_exact_mut(3).zip(px) {
+                for c in 0..3 {
+                    o[c] = tm.map_scaled(p[c], scale);
+                }
+            }
+        });
+        out
     }
 
     /// Writes a PNG (sRGB, clamped) through a temporary file renamed into place: never

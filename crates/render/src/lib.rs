@@ -74,7 +74,7 @@ pub use accum::{render_progressive, Accumulator, Stop};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
 pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, SampleOut, TILE};
 pub use governor::LodGovernor;
-pub use image_out::{read_exr, save_exr, srgb, Aovs, Image, ImageError, ToneCurve, ToneMap};
+pub use image_out::{read_exr, save_exr, srgb, srgb_by_table, Aovs, Image, ImageError, ToneCurve, ToneMap};
 pub use material::{Material, DEFAULT_ALBEDO};
 pub use megaray_base::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use sampling::{light_subset, pixel_offset, Sampler};

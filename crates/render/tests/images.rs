@@ -71,4 +71,12 @@ fn png_is_the_tone_mapped_buffer() {
     assert_eq!(srgb(0.0), 0);
     assert_eq!(srgb(1.0), 255);
     assert_eq!(srgb(0.5), 188);
+    // The table gives what the formula gives, over every 61st float in [0, 1] and past it.
+    for bits in (0..=1.0f32.to_bits() + 1000).step_by(61).chain([1.0f32.to_bits()]) {
+        let x = f32::from_bits(bits);
+        assert_eq!(srgb_by_table(x), srgb(x), "at {x:e}");
+    }
+    for x in [-1.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY, 2.0] {
+        assert_eq!(srgb_by_table(x), srgb(x), "at {x}");
+    }
 }

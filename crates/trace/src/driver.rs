@@ -175,9 +175,23 @@ impl<'s> Tracer<'s> {
         stats::count(|s| s.rays += 1);
         SCRATCH.with(|cell| match cell.try_borrow_mut() {
             Ok(mut scratch) => self.drive::<AVX, ANY>(ray, from, pad, &mut scratch, lod),
-            // Taken (never, since traversals do not nest, but a fresh one is as good).
-            Err(_) => self.drive::<AVX, ANY>(ray, from, pad, &mut Scratch::fresh(), lod),
+            Err(_) => self.drive_fresh::<AVX, ANY>(ray, from, pad, lod),
         })
+    }
+
+    /// [`Tracer::drive`] with scratch memory of its own, for a thread whose own is taken
+    /// (never, since traversals do not nest, but a fresh one is as good). Out of line: inlined,
+    /// the fresh scratch's kilobyte was copied on every ray.
+    #[cold]
+    #[inline(never)]
+    fn drive_fresh<const AVX: bool, const ANY: bool>(
+        &self,
+        ray: &Ray,
+        from: Option<Pending>,
+        pad: usize,
+        lod: Option<&LodRay>,
+    ) -> Traced {
+        self.drive::<AVX, ANY>(ray, from, pad, &mut Scratch::fresh(), lod)
     }
 
     /// A new ray on an unpaged tracer (which never suspends): the shortest way into the

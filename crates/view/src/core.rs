@@ -36,10 +36,12 @@ pub struct ViewOptions {
     /// The sky: an environment light that K turns on and off, and whether it starts on.
     pub sky: Option<Arc<Environment>>,
     pub sky_on: bool,
-    /// The time a frame may take. While the camera moves, frames render at the resolution
-    /// that fits it; every frame ends at it (pixels left are filled from neighbours, rays
-    /// whose tiles are missing answered from levels of detail). `None`: every frame at full
-    /// resolution, exact (scripts and tests, whose frames must not depend on the machine).
+    /// The time from input to the frame that shows it. While the camera moves, frames render
+    /// at the resolution that takes half of it, and end at it; still frames end at half of it
+    /// (a key pressed waits for one to end). Pixels a frame's end leaves are filled from
+    /// neighbours; rays whose tiles are missing are answered from levels of detail. `None`:
+    /// every frame at full resolution, exact (scripts and tests, whose frames must not depend
+    /// on the machine).
     pub frame_budget: Option<Duration>,
     /// Frames accumulated at most while the camera stands still (then the view idles).
     pub max_frames: u32,
@@ -69,6 +71,8 @@ pub struct ViewStats {
     /// Frames a second and millions of rays a second (smoothed over the last frames).
     pub fps: f64,
     pub mrays_s: f64,
+    /// Rays the last frame traced.
+    pub rays: u64,
     /// The last frame's time, seconds.
     pub frame_secs: f64,
     /// The resolution the last frame was rendered at (lower than the view's while moving).
@@ -211,11 +215,9 @@ impl<'t, 's> ViewCore<'t, 's> {
                 self.shader = Builtin::ALL[(i + 1) % Builtin::ALL.len()].1;
                 self.rebuild_renderer();
             }
-            Key::ToggleSky => {
-                if self.opts.sky.is_some() {
-                    self.sky_on = !self.sky_on;
-                    self.rebuild_renderer();
-                }
+            Key::ToggleSky if self.opts.sky.is_some() => {
+                self.sky_on = !self.sky_on;
+                self.rebuild_renderer();
             }
             Key::Help => self.help = !self.help,
             Key::Info => self.info = !self.info,
@@ -281,7 +283,9 @@ impl<'t, 's> ViewCore<'t, 's> {
         self.renderer.settings.camera = self.cam.pose.camera(self.opts.fov, rw, rh);
         let t0 = Instant::now();
         let opts = FrameOptions {
-            deadline: self.opts.frame_budget.map(|b| t0 + b),
+            // Still frames take half the budget: a key pressed while one renders waits for
+            // it, and then for the first moving frame (input to frame within the budget).
+            deadline: self.opts.frame_budget.map(|b| t0 + if moving { b } else { b / 2 }),
             stand_in: self.opts.frame_budget.is_some(),
         };
         let index = if moving { 0 } else { self.acc.frames() };
@@ -296,9 +300,9 @@ impl<'t, 's> ViewCore<'t, 's> {
         }
         if moving {
             if let Some(b) = self.opts.frame_budget {
-                // The resolution whose frame takes about 70% of the budget (a frame's cost
+                // The resolution whose frame takes about half the budget (a frame's cost
                 // goes with its pixels), changed by at most a factor of 1.5 a frame.
-                let want = (0.7 * b.as_secs_f64() / secs).sqrt() as f32;
+                let want = (0.5 * b.as_secs_f64() / secs).sqrt() as f32;
                 self.scale = (self.scale * want.clamp(0.67, 1.5)).clamp(0.15, 1.0);
             }
         }
@@ -307,6 +311,7 @@ impl<'t, 's> ViewCore<'t, 's> {
         self.stats = ViewStats {
             fps: smooth(self.stats.fps, 1.0 / secs),
             mrays_s: smooth(self.stats.mrays_s, frame.rays as f64 / secs * 1e-6),
+            rays: frame.rays,
             frame_secs: secs,
             width: rw,
             height: rh,
