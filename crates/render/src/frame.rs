@@ -11,14 +11,15 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use megaray_base::{Aabb, Vec3};
+use megaray_base::{Aabb, Ray, Vec3};
 
 use megaray_trace::jobs::{self, JobOptions, JobStats};
-use megaray_trace::{RayCaster, Suspended, Tracer};
+use megaray_trace::{Hit, RayCaster, RayCone, Suspended, Tracer};
 use rayon::prelude::*;
 
 use crate::env::Environment;
 use crate::image_out::Image;
+use crate::rows;
 use crate::sampling::{light_subset, pixel_offset, Sampler};
 use crate::settings::RenderSettings;
 use crate::shader::{ShadeCtx, Shader, SurfaceHit};
@@ -103,23 +104,46 @@ impl Renderer {
     ) -> Result<SampleOut, Suspended> {
         let (ox, oy) = pixel_offset(sample_index);
         let ray = self.settings.camera.ray(px as f32 + ox, py as f32 + oy);
+        let hit = caster.intersect_cone(&ray, &self.camera_cone())?;
+        self.shade_camera_hit(px, py, sample_index, &ray, hit, caster)
+    }
+
+    /// The footprint of camera rays.
+    #[inline]
+    pub(crate) fn camera_cone(&self) -> RayCone {
+        RayCone::camera(self.settings.camera.pixel_angle())
+    }
+
+    /// The rest of [`Renderer::sample`] once its camera ray `ray` was traced (with the
+    /// footprint [`Renderer::camera_cone`]) and gave `hit`: the background on a miss, the
+    /// shader (and whatever rays it fires) on a hit.
+    #[inline]
+    pub(crate) fn shade_camera_hit(
+        &self,
+        px: u32,
+        py: u32,
+        sample_index: u32,
+        ray: &Ray,
+        hit: Option<Hit>,
+        caster: &mut dyn RayCaster,
+    ) -> Result<SampleOut, Suspended> {
+        let mut out = SampleOut { depth: f32::INFINITY, rays: 1, ..SampleOut::default() };
+        let Some(hit) = hit else {
+            out.radiance = self.background(ray.dir);
+            return Ok(out);
+        };
         let subset = light_subset(px, py, sample_index, self.environment().lights.subsets());
         let sampler = Sampler::new(px, py, sample_index);
         let mut ctx = ShadeCtx::new(&self.world, &*self.shader, caster, sampler, subset);
-        let mut out = SampleOut { depth: f32::INFINITY, ..SampleOut::default() };
-        match ctx.intersect(&ray)? {
-            None => out.radiance = self.background(ray.dir),
-            Some(hit) => {
-                let sh = SurfaceHit::new(ctx.scene(), &ray, hit);
-                if self.settings.aovs {
-                    out.depth = hit.t;
-                    out.normal = sh.ns;
-                    out.albedo = ctx.material(&sh).albedo;
-                }
-                ctx.enter(&hit);
-                out.radiance = self.shader.shade(&ray, &sh, &mut ctx)?;
-            }
+        ctx.count_camera_ray();
+        let sh = SurfaceHit::new(ctx.scene(), ray, hit);
+        if self.settings.aovs {
+            out.depth = hit.t;
+            out.normal = sh.ns;
+            out.albedo = ctx.material(&sh).albedo;
         }
+        ctx.enter(&hit);
+        out.radiance = self.shader.shade(ray, &sh, &mut ctx)?;
         out.rays = ctx.rays();
         Ok(out)
     }
@@ -233,7 +257,7 @@ fn tile_order(w: u32, h: u32) -> Vec<u32> {
 /// The positions within a 4x4 block in the order a frame against a deadline takes them: each
 /// group of passes halves the spacing of the pixels done (a Bayer order), so that whatever
 /// the deadline leaves is scattered and filled from done neighbours ([`fill_unfinished`]).
-const PASSES: [(u32, u32); 16] = [
+pub(crate) const PASSES: [(u32, u32); 16] = [
     (0, 0),
     (2, 2),
     (2, 0),
@@ -352,28 +376,27 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     // a deadline, the pixels go in interleaved passes (what is left is filled from
     // neighbours), tiles walked back on alternate frames.
     let backward = r.passes.fetch_add(1, Ordering::Relaxed) % 2 == 1;
-    let order = match opts.deadline {
-        Some(_) => interleaved_order(w, h, backward),
-        None => {
-            let mut order = tile_order(w, h);
-            if backward {
-                order.reverse();
-            }
-            order
-        }
-    };
     // Against a deadline, race through the pixels whose tiles are resident; without one,
     // keep the frame's accesses together (see `megaray_trace::jobs`).
     let max_parked = if opts.deadline.is_some() { jobs::MAX_PARKED_DEADLINE } else { jobs::MAX_PARKED };
-    let job_opts = JobOptions { chunk: 64, deadline: opts.deadline, max_parked, stand_in: opts.stand_in };
     let n = (w * h) as usize;
     let aovs = r.settings.aovs;
     let mut f = Frame::blank(w, h, aovs);
-    // Jobs return 16 bytes a pixel without AOVs (the full sample with them): the results
-    // of a frame are rebuilt every frame, so they are kept small.
     let mut finished: Vec<u32> = Vec::new();
     let mut approx: Vec<u32> = Vec::new();
     if aovs {
+        // A pixel a job, the full sample its result.
+        let order = match opts.deadline {
+            Some(_) => interleaved_order(w, h, backward),
+            None => {
+                let mut order = tile_order(w, h);
+                if backward {
+                    order.reverse();
+                }
+                order
+            }
+        };
+        let job_opts = JobOptions { chunk: 64, deadline: opts.deadline, max_parked, stand_in: opts.stand_in };
         let run = jobs::run(tracer, n, &job_opts, |i, caster| {
             let p = order[i];
             r.pixel(p % w, p / w, frame, caster).map(|s| (s, caster.approx()))
@@ -392,23 +415,33 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
             f.albedo[p] = s.albedo.to_array();
         }
     } else {
-        let run = jobs::run(tracer, n, &job_opts, |i, caster| {
-            let p = order[i];
-            r.pixel(p % w, p / w, frame, caster).map(|s| (s.radiance.to_array(), s.rays, caster.approx()))
-        });
+        // A group of a row's pixels a job (`rows`), in the same orders.
+        let groups = match opts.deadline {
+            Some(_) => rows::interleaved_groups(w, h, backward),
+            None => rows::tile_groups(w, h, backward),
+        };
+        let job_opts = JobOptions { chunk: 8, deadline: opts.deadline, max_parked, stand_in: opts.stand_in };
+        let run = jobs::run(tracer, groups.len(), &job_opts, |i, caster| r.group(groups[i], frame, caster));
         f.jobs = run.stats;
         let partial = f.jobs.unfinished > 0;
-        for (i, (rgb, rays, apx)) in run.into_finished() {
-            let p = order[i] as usize;
-            if partial {
-                finished.push(p as u32);
+        let mut pixels = 0u64;
+        for (i, out) in run.into_finished() {
+            let g = groups[i];
+            for k in 0..g.len as usize {
+                let p = g.index(k, w);
+                if partial {
+                    finished.push(p as u32);
+                }
+                if out.approx & (1 << k) != 0 {
+                    approx.push(p as u32);
+                }
+                f.image.pixels[p] = out.rgb[k];
             }
-            if apx {
-                approx.push(p as u32);
-            }
-            f.image.pixels[p] = rgb;
-            f.rays += rays as u64;
+            f.rays += out.rays as u64;
+            pixels += g.len as u64;
         }
+        // The loop's counts are of jobs; the frame's, of pixels.
+        (f.jobs.finished, f.jobs.unfinished) = (pixels, n as u64 - pixels);
     }
     if !approx.is_empty() {
         f.approx = vec![false; n];
@@ -443,6 +476,19 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
         .map(|&(tx, ty)| {
             let mut caster = tracer;
             let mut out = TileOut::default();
+            if !aovs {
+                // Rows of the tile a group at a time (`rows`).
+                for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                    let (x0, x1) = (tx * TILE, ((tx + 1) * TILE).min(w));
+                    for gx in (x0..x1).step_by(rows::GROUP) {
+                        let g = rows::Group { y, x0: gx, step: 1, len: (x1 - gx).min(rows::GROUP as u32) };
+                        let px = r.group(g, frame, &mut caster).expect("a plain in-core Tracer never suspends");
+                        out.color.extend_from_slice(&px.rgb[..g.len as usize]);
+                        out.rays += px.rays as u64;
+                    }
+                }
+                return out;
+            }
             for y in ty * TILE..((ty + 1) * TILE).min(h) {
                 for x in tx * TILE..((tx + 1) * TILE).min(w) {
                     let s = r.pixel(x, y, frame, &mut caster).expect("a plain in-core Tracer never suspends");

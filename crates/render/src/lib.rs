@@ -63,6 +63,7 @@ mod frame;
 mod governor;
 mod image_out;
 mod material;
+mod rows;
 mod sampling;
 mod settings;
 mod shader;

@@ -153,6 +153,12 @@ impl<'a> ShadeCtx<'a> {
         self.caster.intersect_cone(ray, &self.cone)
     }
 
+    /// Counts the camera ray, traced before this context was made
+    /// ([`crate::Renderer::sample`]), among its rays.
+    pub(crate) fn count_camera_ray(&mut self) {
+        self.rays += 1;
+    }
+
     /// Whether anything lies on `ray` (any hit, for shadows).
     pub fn occluded(&mut self, ray: &Ray) -> Result<bool, Suspended> {
         self.rays += 1;

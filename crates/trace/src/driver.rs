@@ -49,7 +49,7 @@ impl<'s> Tracer<'s> {
     }
 
     /// Continues a pending traversal of the same `ray` (same query kind) where it stopped.
-    pub fn resume(&self, ray: &Ray, pending: Pending) -> Traced {
+    pub fn resume(&self, ray: &Ray, pending: Box<Pending>) -> Traced {
         let any = pending.any;
         self.traverse(ray, any, Some(pending), 0)
     }
@@ -128,7 +128,7 @@ impl<'s> Tracer<'s> {
 
     /// The single-ray kernel on this tracer's instruction set (see [`Tracer::walk`]), `pad`
     /// as in [`Tracer::trace_padded`] (0 but in tests).
-    pub(crate) fn traverse(&self, ray: &Ray, any: bool, from: Option<Pending>, pad: usize) -> Traced {
+    pub(crate) fn traverse(&self, ray: &Ray, any: bool, from: Option<Box<Pending>>, pad: usize) -> Traced {
         self.traverse_with(ray, any, from, pad, None)
     }
 
@@ -138,7 +138,7 @@ impl<'s> Tracer<'s> {
         &self,
         ray: &Ray,
         any: bool,
-        from: Option<Pending>,
+        from: Option<Box<Pending>>,
         pad: usize,
         lod: Option<&LodRay>,
     ) -> Traced {
@@ -168,7 +168,7 @@ impl<'s> Tracer<'s> {
     pub(crate) fn traverse_in<const AVX: bool, const ANY: bool>(
         &self,
         ray: &Ray,
-        from: Option<Pending>,
+        from: Option<Box<Pending>>,
         pad: usize,
         lod: Option<&LodRay>,
     ) -> Traced {
@@ -187,7 +187,7 @@ impl<'s> Tracer<'s> {
     fn drive_fresh<const AVX: bool, const ANY: bool>(
         &self,
         ray: &Ray,
-        from: Option<Pending>,
+        from: Option<Box<Pending>>,
         pad: usize,
         lod: Option<&LodRay>,
     ) -> Traced {
@@ -242,7 +242,7 @@ impl<'s> Tracer<'s> {
     pub(crate) fn drive<const AVX: bool, const ANY: bool>(
         &self,
         ray: &Ray,
-        from: Option<Pending>,
+        from: Option<Box<Pending>>,
         pad: usize,
         scratch: &mut Scratch,
         lod: Option<&LodRay>,
@@ -267,7 +267,7 @@ impl<'s> Tracer<'s> {
         &self,
         ray: &Ray,
         w: &mut Walk<'_>,
-        from: Option<Pending>,
+        from: Option<Box<Pending>>,
         pad: usize,
         lod: Option<&LodRay>,
     ) -> Traced {
@@ -295,7 +295,7 @@ impl<'s> Tracer<'s> {
     pub(crate) fn traced(&self, r: Result<Option<Found>, Box<Pending>>, prior: Prior) -> Traced {
         match r {
             Ok(f) => Traced::Done(self.hit_after(f, prior)),
-            Err(p) => Traced::Pending(*p),
+            Err(p) => Traced::Pending(p),
         }
     }
 

@@ -29,7 +29,7 @@ use std::time::{Duration, Instant};
 use megaray_base::Ray;
 use megaray_scene::Scene;
 
-use crate::{Hit, Pending, RayCaster, RayCone, Suspended, Traced, Tracer};
+use crate::{Hit, Memo, Pending, RayCaster, RayCone, Suspended, Traced, Tracer};
 
 /// The default cap on jobs parked at once (see the module documentation).
 pub const MAX_PARKED: usize = 1 << 8;
@@ -101,7 +101,9 @@ impl<T> JobsResult<T> {
 enum Logged {
     Hit(Ray, Option<Hit>),
     Occluded(Ray, bool),
-    Pending(Ray, Pending),
+    Pending(Ray, Box<Pending>),
+    /// A finished piece of the job, standing for the queries it made ([`RayCaster::checkpoint`]).
+    Memo(Memo),
 }
 
 /// The [`RayCaster`] jobs fire their rays through: answers from the job's log first (when it
@@ -268,6 +270,30 @@ impl RayCaster for Replay<'_, '_> {
     }
     fn occluded_cone(&mut self, ray: &Ray, cone: &RayCone) -> Result<bool, Suspended> {
         self.query_cone(ray, true, cone).map(|h| h.is_some())
+    }
+    fn take_approx(&mut self) -> bool {
+        std::mem::take(&mut self.approx)
+    }
+    fn mark(&mut self) -> usize {
+        self.cursor
+    }
+    fn checkpoint(&mut self, mark: usize, memo: Memo) {
+        if self.tracer.pager().is_none() {
+            return;
+        }
+        self.log.truncate(mark.min(self.cursor));
+        self.log.push(Logged::Memo(memo));
+        self.cursor = self.log.len();
+    }
+    fn recall(&mut self) -> Option<Memo> {
+        match self.log.get(self.cursor) {
+            Some(Logged::Memo(m)) => {
+                let m = *m;
+                self.cursor += 1;
+                Some(m)
+            }
+            _ => None,
+        }
     }
 }
 

@@ -114,7 +114,31 @@ pub trait RayCaster {
         let _ = cone;
         self.occluded(ray)
     }
+    /// Whether a stand-in answered some ray since the last call (the result made from those
+    /// rays is approximate), and forgets it. A caster without stand-ins never does.
+    fn take_approx(&mut self) -> bool {
+        false
+    }
+    /// Where the job stands in its queries, for a later [`RayCaster::checkpoint`].
+    fn mark(&mut self) -> usize {
+        0
+    }
+    /// Records `memo`, the result of the work done since `mark` (a pixel of a job of
+    /// several), in place of that work's queries: when a suspended job runs again,
+    /// [`RayCaster::recall`] gives it back instead of the work being redone, so a job needs
+    /// the tiles of one piece of work at a time, never those of all its pieces at once.
+    fn checkpoint(&mut self, mark: usize, memo: Memo) {
+        let _ = (mark, memo);
+    }
+    /// The memo recorded at this point of an earlier run of the job, if any.
+    fn recall(&mut self) -> Option<Memo> {
+        None
+    }
 }
+
+/// A piece of a job's result recorded by [`RayCaster::checkpoint`]: five words whose meaning
+/// is the job's (a pixel's colour bits, its ray count and whether it is approximate).
+pub type Memo = [u32; 5];
 
 /// A plain tracer answers every ray at once (a paged one waits for its tiles).
 impl RayCaster for &Tracer<'_> {
@@ -160,6 +184,7 @@ impl Pending {
 pub enum Traced {
     /// Finished: the closest hit (or, for an any-hit query, some hit), if any.
     Done(Option<Hit>),
-    /// Stopped at an absent tile (now requested).
-    Pending(Pending),
+    /// Stopped at an absent tile (now requested). Boxed: rare, and large enough that
+    /// moving it inline cost every ray a copy.
+    Pending(Box<Pending>),
 }

@@ -203,6 +203,10 @@ impl<'s> Tracer<'s> {
     /// The closest hit of `ray` (`any`: any hit) at the level of detail its cone chooses,
     /// waiting for missing tiles on a paged tracer (pinned only while traversing).
     pub fn trace_cone(&self, ray: &Ray, any: bool, c: &RayCone) -> Option<Hit> {
+        if self.misses_bounds(ray) {
+            // Before the level of detail's set-up: most of a distant model's rays.
+            return None;
+        }
         let Some(lod) = self.lod_ray(c, false) else {
             if self.pager.is_none() {
                 // Full detail, unpaged: the fastest way in.
@@ -239,7 +243,7 @@ impl<'s> Tracer<'s> {
     /// [`Tracer::try_intersect`] (`any`: [`Tracer::try_occluded`]) at the level of detail
     /// `c` chooses, or its resumption (`from`): the ray waits for the tiles of that level.
     /// Paged tracers: call under a pin.
-    pub fn try_cone(&self, ray: &Ray, any: bool, c: &RayCone, from: Option<Pending>) -> Traced {
+    pub fn try_cone(&self, ray: &Ray, any: bool, c: &RayCone, from: Option<Box<Pending>>) -> Traced {
         let lod = self.lod_ray(c, false);
         let any = from.as_ref().map_or(any, |p| p.any);
         self.traverse_with(ray, any, from, 0, lod.as_ref())

@@ -1,0 +1,156 @@
+//! Camera rays a row at a time: the frame loops' path for frames without AOVs. A job is up to
+//! [`GROUP`] pixels of one row (side by side, or every 4th in a pass against a deadline);
+//! their camera rays are made 16 at a time ([`Camera::rays16`]: the same bits as
+//! [`Camera::ray`]) and traced through the caster before any shading context exists; a miss
+//! is the background, a hit is shaded as [`Renderer::sample`] shades it. The same samples as
+//! [`Renderer::pixel`], for less work per pixel and per job (docs/PERF.md, "Camera rays a row
+//! at a time").
+//!
+//! [`Camera::rays16`]: megaray_base::Camera::rays16
+//! [`Camera::ray`]: megaray_base::Camera::ray
+
+use megaray_trace::{RayCaster, Suspended};
+
+use crate::frame::{Renderer, TILE};
+use crate::sampling::pixel_offset;
+
+/// The most pixels of a job.
+pub(crate) const GROUP: usize = 16;
+
+/// A job's pixels: `len` pixels of row `y` from `x0`, `step` apart.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Group {
+    pub y: u32,
+    pub x0: u32,
+    pub step: u32,
+    pub len: u32,
+}
+
+impl Group {
+    /// The row-major index of pixel `k` of the group in a `w`-wide image.
+    #[inline]
+    pub fn index(&self, k: usize, w: u32) -> usize {
+        (self.y * w + self.x0 + self.step * k as u32) as usize
+    }
+}
+
+/// A group's result: its pixels' colours, the rays they fired, which of them a stand-in
+/// answered (bit `k`: pixel `k`). Kept small: a frame's results are gathered every frame.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct GroupOut {
+    pub rgb: [[f32; 3]; GROUP],
+    pub rays: u32,
+    pub approx: u16,
+}
+
+/// Pushes the groups of row `y` over `xs` (`step` apart) onto `out`, at most [`GROUP`] each.
+fn push_row(out: &mut Vec<Group>, y: u32, xs: std::iter::StepBy<std::ops::Range<u32>>, step: u32) {
+    let xs: Vec<u32> = xs.collect();
+    for c in xs.chunks(GROUP) {
+        out.push(Group { y, x0: c[0], step, len: c.len() as u32 });
+    }
+}
+
+/// The groups of a `w` x `h` frame in tile order (32x32 tiles in rows, rows within a tile),
+/// backward when `backward` (see [`crate::render_frame_with`]).
+pub(crate) fn tile_groups(w: u32, h: u32, backward: bool) -> Vec<Group> {
+    let mut out = Vec::new();
+    for ty in 0..h.div_ceil(TILE) {
+        for tx in 0..w.div_ceil(TILE) {
+            for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                push_row(&mut out, y, (tx * TILE..((tx + 1) * TILE).min(w)).step_by(1), 1);
+            }
+        }
+    }
+    if backward {
+        out.reverse();
+    }
+    out
+}
+
+/// The groups of a frame against a deadline: the passes of [`crate::frame::PASSES`] (one pixel
+/// of every 4x4 block a pass), tile by tile, tiles backward when `backward`.
+pub(crate) fn interleaved_groups(w: u32, h: u32, backward: bool) -> Vec<Group> {
+    let mut tiles: Vec<(u32, u32)> =
+        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty))).collect();
+    if backward {
+        tiles.reverse();
+    }
+    let mut out = Vec::new();
+    for &(dx, dy) in &crate::frame::PASSES {
+        for &(tx, ty) in &tiles {
+            for y in (ty * TILE + dy..((ty + 1) * TILE).min(h)).step_by(4) {
+                push_row(&mut out, y, (tx * TILE + dx..((tx + 1) * TILE).min(w)).step_by(4), 4);
+            }
+        }
+    }
+    out
+}
+
+impl Renderer {
+    /// The pixels of `g` in frame `frame` (as [`Renderer::pixel`] gives them), traced through
+    /// `caster`; entries past `g.len` are left black.
+    pub(crate) fn group<C: RayCaster>(&self, g: Group, frame: u32, caster: &mut C) -> Result<GroupOut, Suspended> {
+        let mut out = GroupOut { rgb: [[0.0; 3]; GROUP], rays: 0, approx: 0 };
+        let len = g.len as usize;
+        // One sample a pixel: sample index `frame`, the same offset for every pixel.
+        let one = self.settings.spp.max(1) == 1;
+        let rays = one.then(|| {
+            let (ox, oy) = pixel_offset(frame);
+            let sx: [f32; 16] = std::array::from_fn(|k| (g.x0 + g.step * k.min(len - 1) as u32) as f32 + ox);
+            self.settings.camera.rays16(&sx, &[g.y as f32 + oy; 16])
+        });
+        let cone = self.camera_cone();
+        for k in 0..len {
+            // A pixel finished in an earlier run of this job (before it was suspended) is
+            // recalled, not redone: the job needs one pixel's tiles at a time.
+            if let Some(m) = caster.recall() {
+                out.rgb[k] = [f32::from_bits(m[0]), f32::from_bits(m[1]), f32::from_bits(m[2])];
+                out.rays += m[3];
+                out.approx |= ((m[4] != 0) as u16) << k;
+                continue;
+            }
+            let mark = caster.mark();
+            let x = g.x0 + g.step * k as u32;
+            let s = match &rays {
+                Some(rays) => {
+                    let ray = rays.ray(k);
+                    let hit = caster.intersect_cone(&ray, &cone)?;
+                    self.shade_camera_hit(x, g.y, frame, &ray, hit, caster)?
+                }
+                None => self.pixel(x, g.y, frame, caster)?,
+            };
+            let rgb = s.radiance.to_array();
+            let approx = caster.take_approx();
+            out.rgb[k] = rgb;
+            out.rays += s.rays;
+            out.approx |= (approx as u16) << k;
+            caster.checkpoint(mark, [rgb[0].to_bits(), rgb[1].to_bits(), rgb[2].to_bits(), s.rays, approx as u32]);
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every pixel in exactly one group, whatever the size and order.
+    #[test]
+    fn groups_cover_each_pixel_once() {
+        for (w, h) in [(1, 1), (7, 3), (33, 65), (64, 32), (100, 37)] {
+            for backward in [false, true] {
+                for groups in [tile_groups(w, h, backward), interleaved_groups(w, h, backward)] {
+                    let mut seen = vec![0u32; (w * h) as usize];
+                    for g in &groups {
+                        assert!((1..=GROUP as u32).contains(&g.len));
+                        for k in 0..g.len as usize {
+                            seen[g.index(k, w)] += 1;
+                        }
+                    }
+                    assert!(seen.iter().all(|&c| c == 1), "{w}x{h}");
+                }
+            }
+        }
+    }
+}
