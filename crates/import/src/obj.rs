@@ -84,6 +84,8 @@ struct Obj<'a> {
     /// Material of the next face, `None` when it must be recomputed.
     material: Option<u32>,
     faces: u64,
+    /// Faces of fewer than three vertices (lines written as faces), skipped.
+    short_faces: u64,
     triangles: u64,
     attr: TriAttr,
 }
@@ -117,6 +119,7 @@ pub(crate) fn import(
         group: None,
         material: None,
         faces: 0,
+        short_faces: 0,
         triangles: 0,
         attr: TriAttr::default(),
     };
@@ -130,6 +133,9 @@ pub(crate) fn import(
         obj.line(line, line_no, sink)?;
     }
     r.flush_progress();
+    if obj.short_faces > 0 {
+        progress.note(&format!("{}: skipped {} faces with fewer than 3 vertices", path.display(), obj.short_faces));
+    }
     let spilled =
         obj.pos.spilled() + obj.nrm.spilled() + obj.tex.spilled() + obj.col.as_ref().map_or(0, VertexStore::spilled);
     Ok(ImportSummary { triangles: obj.triangles, vertices: obj.pos.len(), bytes: r.total_read(), spilled })
@@ -359,7 +365,7 @@ impl Obj<'_> {
             }
         }
         if k < 3 {
-            return Err(self.err(no, format!("face {face} has {k} vertices (at least 3 needed)")));
+            self.short_faces += 1;
         }
         Ok(())
     }

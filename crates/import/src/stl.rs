@@ -39,7 +39,7 @@ pub(crate) fn import(
             read_binary(path, &mut r, n as u64, sink)?
         }
         _ if solid => {
-            let s = read_ascii(path, &mut r, sink)?;
+            let s = read_ascii(path, &mut r, sink, progress)?;
             if let (0, Some(n)) = (s.triangles, count) {
                 // Most likely a binary file whose count lies.
                 return Err(ImportError::new(
@@ -129,11 +129,12 @@ fn read_ascii<R: io::Read>(
     path: &Path,
     r: &mut ByteReader<'_, R>,
     sink: &mut dyn TriangleSink,
+    progress: &dyn Progress,
 ) -> Result<ImportSummary, ImportError> {
     let attr = TriAttr { material: NO_MATERIAL, ..TriAttr::default() };
+    let mut short = 0u64;
     let mut triangles = 0u64;
     let mut vertices = 0u64;
-    let mut facets = 0u64;
     let mut in_loop = false;
     let mut k = 0usize;
     let mut v = [[0.0f32; 3]; 3];
@@ -148,8 +149,7 @@ fn read_ascii<R: io::Read>(
         let mut t = line.split(|b| b.is_ascii_whitespace()).filter(|t| !t.is_empty());
         let Some(kw) = t.next() else { continue };
         match kw {
-            b"solid" | b"endsolid" | b"endfacet" => {}
-            b"facet" => facets += 1,
+            b"solid" | b"endsolid" | b"facet" | b"endfacet" => {}
             b"outer" => {
                 in_loop = true;
                 k = 0;
@@ -180,9 +180,7 @@ fn read_ascii<R: io::Read>(
                 }
             }
             b"endloop" => {
-                if k < 3 {
-                    return Err(err(format!("facet {facets} has {k} vertices (at least 3 needed)")));
-                }
+                short += u64::from(k < 3);
                 in_loop = false;
             }
             other => {
@@ -199,6 +197,9 @@ fn read_ascii<R: io::Read>(
             Some(format!("line {}", r.line())),
             "truncated: the file ends inside a facet",
         ));
+    }
+    if short > 0 {
+        progress.note(&format!("{}: skipped {short} facets with fewer than 3 vertices", path.display()));
     }
     Ok(ImportSummary { triangles, vertices, ..ImportSummary::default() })
 }

@@ -150,8 +150,6 @@ fn obj_errors() {
     assert_error(&import_error(&path), "vt.obj", &["texture coordinate index 2 out of range"]);
     let path = write(dir.path(), "num.obj", "v 0 0 0\nv 1 zero 0\n");
     assert_error(&import_error(&path), "num.obj", &["line 2: bad number 'zero'"]);
-    let path = write(dir.path(), "short.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
-    assert_error(&import_error(&path), "short.obj", &["face 1 has 2 vertices"]);
     let path = write(dir.path(), "inf.obj", "v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\n");
     assert_error(&import_error(&path), "inf.obj", &["line 3: vertex 3: coordinate is infinite"]);
     let path = write(dir.path(), "none.obj", "v 0 0 0\nv 1 0 0\n# no faces\n");
@@ -179,4 +177,25 @@ fn obj_spills_and_matches() {
     assert_eq!(a.tris.len(), n - 2);
     assert!(a.tris == b.tris);
     assert_eq!(a.tris[5].0, [[5.0, 1.0, 0.0], [6.0, 0.0, 0.0], [7.0, 1.0, 0.0]]);
+}
+
+/// Real exporters write lines as two-vertex faces (and points as one-vertex faces): those are
+/// skipped with one note giving the count, and the rest of the model loads.
+#[test]
+fn short_faces_points_and_lines_are_skipped_with_a_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 1 2\nf 4\nl 1 2 3\np 1\nf 2 4 3\nf 3/1\n";
+    let text = text.replace("f 3/1", "f 3");
+    let path = write(dir.path(), "lines.obj", &text);
+    let notes = Notes::default();
+    let mut c = Collect::default();
+    let s = import_file(&path, &ImportOptions::default(), &mut c, &notes).unwrap();
+    assert_eq!((s.triangles, c.tris.len()), (2, 2));
+    let notes = notes.0.into_inner().unwrap();
+    let skipped: Vec<&String> = notes.iter().filter(|n| n.contains("skipped")).collect();
+    assert_eq!(skipped.len(), 1, "one note per file: {notes:?}");
+    assert!(skipped[0].contains("lines.obj") && skipped[0].contains("skipped 3 faces"), "{}", skipped[0]);
+    // A file of nothing but lines is still an error: it holds no triangles.
+    let path = write(dir.path(), "only.obj", "v 0 0 0\nv 1 0 0\nf 1 2\n");
+    assert_error(&import_error(&path), "only.obj", &["no triangles"]);
 }

@@ -204,3 +204,36 @@ fn progress_counts_the_file_bytes() {
         assert!(rec.finished.load(std::sync::atomic::Ordering::Relaxed));
     }
 }
+
+/// Records notes.
+#[derive(Default)]
+struct Notes(std::sync::Mutex<Vec<String>>);
+impl megaray_base::Progress for Notes {
+    fn stage(&self, _: &str, _: u64) {}
+    fn inc(&self, _: u64) {}
+    fn note(&self, msg: &str) {
+        self.0.lock().unwrap().push(msg.to_string());
+    }
+}
+
+/// Points and lines written as faces of one or two vertices (and empty faces) are skipped with
+/// one note giving the count, in every encoding; the triangles around them load.
+#[test]
+fn points_and_lines_are_skipped_with_a_count() {
+    let verts = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]];
+    let faces = vec![vec![0, 1, 2], vec![0, 1], vec![3], vec![], vec![1, 3, 2, 0], vec![2, 3]];
+    let dir = tempfile::tempdir().unwrap();
+    for enc in Enc::ALL {
+        let path = dir.path().join("lines.ply");
+        write_ply(&path, &PlySpec::new(enc), &verts, &faces);
+        let notes = Notes::default();
+        let mut c = common::Collect::default();
+        let s = megaray_import::import_file(&path, &ImportOptions::default(), &mut c, &notes).unwrap();
+        assert_eq!(s.triangles, 3, "{enc:?}");
+        assert_eq!(positions(&c), common::fan(&verts, &faces), "{enc:?}");
+        let notes = notes.0.into_inner().unwrap();
+        let skipped: Vec<&String> = notes.iter().filter(|n| n.contains("skipped")).collect();
+        assert_eq!(skipped.len(), 1, "{notes:?}");
+        assert!(skipped[0].contains("lines.ply") && skipped[0].contains("skipped 4 faces"), "{}", skipped[0]);
+    }
+}

@@ -110,8 +110,9 @@ fn ascii_stl_errors() {
     assert_error(&import_error(&path), "bad.stl", &["line 5: bad number 'x'"]);
     std::fs::write(&path, "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n").unwrap();
     assert_error(&import_error(&path), "bad.stl", &["truncated"]);
+    // A facet of two vertices (a line) is skipped; a file of nothing else holds no triangles.
     std::fs::write(&path, "solid s\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nendloop\n").unwrap();
-    assert_error(&import_error(&path), "bad.stl", &["2 vertices"]);
+    assert_error(&import_error(&path), "bad.stl", &["no triangles"]);
     std::fs::write(&path, "solid s\nendsolid s\n").unwrap();
     assert_error(&import_error(&path), "bad.stl", &["no triangles"]);
 }
@@ -124,4 +125,41 @@ fn stl_nan_is_an_error() {
     t[1][2][1] = f32::NAN;
     std::fs::write(&path, binary(b"x", 3, &t)).unwrap();
     assert_error(&import_error(&path), "nan.stl", &["triangle 1: vertex 2 of the triangle has a NaN"]);
+}
+
+/// Records notes.
+#[derive(Default)]
+struct Notes(std::sync::Mutex<Vec<String>>);
+impl megaray_base::Progress for Notes {
+    fn stage(&self, _: &str, _: u64) {}
+    fn inc(&self, _: u64) {}
+    fn note(&self, msg: &str) {
+        self.0.lock().unwrap().push(msg.to_string());
+    }
+}
+
+/// An ascii facet of fewer than three vertices is skipped with one note giving the count.
+#[test]
+fn ascii_short_facets_are_skipped_with_a_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("lines.stl");
+    let facet = |vs: &[&str]| {
+        let v: String = vs.iter().map(|v| format!("vertex {v}\n")).collect();
+        format!("facet normal 0 0 1\nouter loop\n{v}endloop\nendfacet\n")
+    };
+    let text = format!(
+        "solid s\n{}{}{}{}endsolid s\n",
+        facet(&["0 0 0", "1 0 0"]),
+        facet(&["0 0 0", "1 0 0", "0 1 0"]),
+        facet(&["0 0 0"]),
+        facet(&["0 0 1", "1 0 1", "0 1 1"]),
+    );
+    std::fs::write(&path, text).unwrap();
+    let notes = Notes::default();
+    let mut c = common::Collect::default();
+    let s = megaray_import::import_file(&path, &megaray_import::ImportOptions::default(), &mut c, &notes).unwrap();
+    assert_eq!((s.triangles, c.tris.len()), (2, 2));
+    let notes = notes.0.into_inner().unwrap();
+    assert_eq!(notes.len(), 1, "{notes:?}");
+    assert!(notes[0].contains("lines.stl") && notes[0].contains("skipped 2 facets"), "{}", notes[0]);
 }
