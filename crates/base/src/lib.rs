@@ -1,6 +1,6 @@
 //! # megaray-base: the foundations every other megaray crate stands on
 //!
-//! Nothing here knows about files, scenes or images. It holds:
+//! Nothing here knows about scenes or images. It holds:
 //! - [`Aabb`]: axis-aligned bounding boxes (build and trace both use them);
 //! - [`Camera`]: the pinhole camera and the benchmark framings (rays through pixels);
 //! - [`Ray`] and [`intersect_triangle`]: the scalar, watertight ray-triangle test
@@ -8,7 +8,9 @@
 //! - [`Progress`]: how long-running library code reports progress without knowing about terminals;
 //! - [`parse_size`]: `64K`, `1G`, `1.5GiB` style sizes, for memory budgets on the command line;
 //! - [`process_memory`]: the process's resident memory as the kernel counts it (file-backed,
-//!   anonymous, peak), which the pager's statistics report beside its own count.
+//!   anonymous, peak), which the pager's statistics report beside its own count;
+//! - [`temp`]: how outputs are written (a temporary name, then a rename) and how temporaries left
+//!   by killed processes are cleaned up.
 //!
 //! ```
 //! use megaray_base::{Ray, intersect_triangle, Vec3};
@@ -22,6 +24,7 @@ mod camera;
 mod progress;
 mod ray;
 mod size;
+pub mod temp;
 
 pub use aabb::Aabb;
 pub use camera::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};

@@ -193,8 +193,10 @@ pub fn build_scene(
     }
     let t0 = Instant::now();
     let out_dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    // Build folders of killed builds here are removed (megaray_base::temp).
+    megaray_base::temp::clean_stale(out_dir);
     let tmp = tempfile::Builder::new()
-        .prefix(".megaray-build-")
+        .prefix(&megaray_base::temp::build_dir_prefix())
         .tempdir_in(out_dir)
         .map_err(|e| BuildError::io(out_dir, "create a temporary folder in", e))?;
     let pool = rayon::ThreadPoolBuilder::new()

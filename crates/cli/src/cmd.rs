@@ -203,7 +203,16 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
     let cancel = opts.cancel.clone();
     let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed));
     let generated = GeneratedInputs::of(&a.inputs, &a.out, bars)?;
-    let s = build_scene(&generated.inputs, &a.out, &opts, bars)?;
+    let s = build_scene(&generated.inputs, &a.out, &opts, bars).map_err(|e| {
+        // Faults in temporary files name those; say which build they stopped.
+        let named = e.to_string().contains(&*a.out.to_string_lossy());
+        let e = anyhow::Error::from(e);
+        if named {
+            e
+        } else {
+            e.context(format!("building {}", a.out.display()))
+        }
+    })?;
     drop(generated);
     bars.finish();
     if a.json {

@@ -4,6 +4,7 @@
 
 mod bench;
 mod cmd;
+mod fault;
 mod open;
 mod paging;
 mod progress;
@@ -133,6 +134,7 @@ enum Command {
 
 fn main() {
     let cli = Cli::parse();
+    fault::ignore_file_size_signal();
     let bars = progress::Bars::new(cli.quiet);
     if let Err(e) = kernels_from_env().and_then(megaray_trace::Kernels::configure) {
         eprintln!("megaray: error: {e}");

@@ -43,6 +43,7 @@ impl PagingArgs {
     /// Opens `path`: mapped without a budget; with one, read into memory of its own tile by
     /// tile by a pager ([`Scene::open_owned`]).
     pub fn open(&self, path: &Path) -> Result<(Arc<Scene>, Option<Pager>)> {
+        crate::fault::watch(path);
         let Some(budget) = self.mem else { return Ok((Arc::new(Scene::open(path)?), None)) };
         if !(1..=64).contains(&self.fetchers) {
             bail!("--fetchers must be 1..=64");

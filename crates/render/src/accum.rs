@@ -236,7 +236,9 @@ pub struct Stop {
 }
 
 /// Renders frames 0, 1, 2, ... into an accumulator until `stop`, calling `on_frame` after
-/// each (for progress bars and previews).
+/// each (for progress bars and previews). Stops early, after the frame in which it was found,
+/// when the scene or its pager reports a fault (a damaged or vanished tile: see
+/// `Scene::first_error`, `Pager::first_error`), for the caller to report.
 pub fn render_progressive(
     r: &Renderer,
     tracer: &Tracer,
@@ -258,6 +260,10 @@ pub fn render_progressive(
         governor.after_frame(tracer);
         on_frame(&acc);
         if stop.time.is_some_and(|t| start.elapsed() >= t) {
+            break;
+        }
+        let scene_fault = tracer.scene().first_error().is_some();
+        if scene_fault || tracer.pager().is_some_and(|p| p.first_error().is_some()) {
             break;
         }
     }

@@ -115,11 +115,12 @@ pub fn srgb_by_table(x: f32) -> u8 {
     k as u8
 }
 
-/// `.NAME.tmp-PID` beside `path`.
+/// `.NAME.tmp-PID` beside `path` ([`megaray_base::temp`]); temporaries of killed writers in
+/// that folder are removed first.
 pub(crate) fn temp_path(path: &Path) -> Result<PathBuf, String> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().ok_or_else(|| "not a file name".to_string())?.to_string_lossy();
-    Ok(dir.join(format!(".{name}.tmp-{}", std::process::id())))
+    let tmp = megaray_base::temp::temp_path(path).ok_or_else(|| "not a file name".to_string())?;
+    megaray_base::temp::clean_stale(tmp.parent().unwrap_or(Path::new(".")));
+    Ok(tmp)
 }
 
 /// Runs `write` on a temporary path, then renames it to `path`; removes it on failure.

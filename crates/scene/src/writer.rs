@@ -152,8 +152,10 @@ impl SceneWriter {
         tile_target: u32,
     ) -> Result<SceneWriter, SceneError> {
         let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+        // `.NAME.tmp-PID` (megaray_base::temp); those of killed builds here go first.
+        megaray_base::temp::clean_stale(dir);
+        let tmp = megaray_base::temp::temp_path(path)
+            .ok_or_else(|| SceneError::new(path, SceneErrorKind::Io, "not a file name".to_string()))?;
         let file = File::create(&tmp).map_err(|e| SceneError::io(path, "create", &e))?;
         let top_off = HEADER_PAGE;
         let parts_off = top_off + (top_nodes.len() * NODE_BYTES) as u64;
