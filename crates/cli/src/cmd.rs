@@ -328,6 +328,11 @@ pub struct RenderArgs {
     /// Shadow rays per hit toward the subset's lights (0: all lights of the subset); AO rays per hit.
     #[arg(long, value_name = "K", default_value_t = 2)]
     light_samples: u32,
+    /// How a hit draws its K lights from its subset: `contribution` (in proportion to power
+    /// times cosine there; lights below the horizon never) or `uniform` (the seed tutorial's
+    /// interleaved sampling)
+    #[arg(long, value_name = "HOW", default_value = "contribution")]
+    light_select: String,
     /// Frames to accumulate (new sample positions each); default 1, or unlimited with --time.
     #[arg(long, value_name = "N")]
     frames: Option<u32>,
@@ -407,6 +412,7 @@ impl RenderArgs {
             env_lights: 1024,
             light_subsets: 16,
             light_samples: 2,
+            light_select: "contribution".into(),
             frames: None,
             time: None,
             exposure: 0.0,
@@ -537,6 +543,10 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     settings.spp = a.spp;
     settings.shader = shader;
     settings.light_samples = a.light_samples;
+    settings.light_select =
+        megaray_render::LightSelect::ALL.iter().find(|(n, _)| *n == a.light_select).map(|&(_, l)| l).ok_or_else(
+            || anyhow::anyhow!("--light-select must be contribution or uniform, not '{}'", a.light_select),
+        )?;
     settings.max_depth = a.max_depth;
     settings.ao_radius = a.ao_radius;
     settings.aovs = aovs;

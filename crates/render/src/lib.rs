@@ -62,6 +62,7 @@ mod env;
 mod frame;
 mod governor;
 mod image_out;
+mod lights;
 mod material;
 mod rows;
 mod sampling;
@@ -76,6 +77,7 @@ pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap,
 pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, SampleOut, TILE};
 pub use governor::LodGovernor;
 pub use image_out::{read_exr, save_exr, srgb, srgb_by_table, Aovs, Image, ImageError, ToneCurve, ToneMap};
+pub use lights::{Draws, LightSelect};
 pub use material::{Material, DEFAULT_ALBEDO};
 pub use megaray_base::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use sampling::{light_subset, pixel_offset, Sampler};

@@ -34,6 +34,9 @@ pub struct RenderSettings {
     /// Shadow rays per hit toward the environment's lights (0: every light of the subset);
     /// rays per hit for ambient occlusion.
     pub light_samples: u32,
+    /// How those shadow rays' lights are drawn from the sample's subset: in proportion to
+    /// power times cosine (the default) or uniformly (the seed tutorial's way).
+    pub light_select: crate::LightSelect,
     /// Nesting limit of [`ShadeCtx::trace`](crate::ShadeCtx::trace) (mirror and glass bounces).
     pub max_depth: u32,
     /// Ambient occlusion distance, as a fraction of the scene diagonal.
@@ -62,6 +65,7 @@ impl RenderSettings {
             eps_scale: 1e-4,
             shader: Builtin::Diffuse,
             light_samples: 2,
+            light_select: crate::LightSelect::Contribution,
             max_depth: 6,
             ao_radius: 0.05,
             aovs: false,

@@ -253,9 +253,10 @@ impl<'a> ShadeCtx<'a> {
 
     /// Direct light from the environment's virtual lights (the given environment, or the
     /// constant sky colour), with interleaved sampling: this sample's subset, weights times
-    /// the number of subsets, and `light_samples` of the subset's lights chosen by stratified
-    /// sampling (each weighted by subset size / light_samples), or every light of the subset
-    /// when `light_samples` is 0 or at least the subset's size.
+    /// the number of subsets, and `light_samples` of the subset's lights drawn as
+    /// `settings.light_select` says ([`crate::LightSelect`]; stratified, each weighted by one
+    /// over its probability), or every light of the subset when `light_samples` is 0 or at
+    /// least the subset's size.
     pub fn env_direct(&mut self, hit: &SurfaceHit, brdf: impl Fn(Vec3) -> Vec3) -> Result<Vec3, Suspended> {
         let lights = &self.world.environment().lights;
         let m = lights.subsets() as f32;
@@ -270,13 +271,33 @@ impl<'a> ShadeCtx<'a> {
             for l in subset {
                 sum += self.light_contribution(hit, l, m, &brdf)?;
             }
-        } else {
-            let u = self.next_1d();
+            return Ok(sum);
+        }
+        let u = self.next_1d();
+        if self.world.settings.light_select == crate::LightSelect::Uniform {
             let scale = m * n as f32 / k as f32;
             for j in 0..k {
                 let i = (((j as f32 + u) / k as f32 * n as f32) as usize).min(n - 1);
                 sum += self.light_contribution(hit, &subset[i], scale, &brdf)?;
             }
+            return Ok(sum);
+        }
+        // Power times cosine; 0 below the horizon of either normal (such a light brings
+        // nothing: see light_contribution).
+        let mut stack = [0.0f32; 128];
+        let mut heap = Vec::new();
+        let w: &mut [f32] = if n <= stack.len() {
+            &mut stack[..n]
+        } else {
+            heap.resize(n, 0.0);
+            &mut heap
+        };
+        for (w, l) in w.iter_mut().zip(subset) {
+            let cos = hit.ns.dot(l.dir);
+            *w = if cos > 0.0 && hit.ng.dot(l.dir) > 0.0 { crate::luminance(l.weight) * cos } else { 0.0 };
+        }
+        for (i, f) in crate::Draws::new(w, k, u) {
+            sum += self.light_contribution(hit, &subset[i], m * f, &brdf)?;
         }
         Ok(sum)
     }
