@@ -348,6 +348,10 @@ pub struct RenderArgs {
     /// Extra EXR layers, comma-separated: depth, normal, albedo.
     #[arg(long, value_name = "LIST")]
     aov: Option<String>,
+    /// Denoise the accumulated image: an edge-avoiding filter guided by the albedo, normal and
+    /// depth of the first hits (computed for it), fading out as the image converges
+    #[arg(long)]
+    denoise: bool,
     /// Mirror and glass bounce limit.
     #[arg(long, value_name = "N", default_value_t = 6)]
     max_depth: u32,
@@ -418,6 +422,7 @@ impl RenderArgs {
             exposure: 0.0,
             tonemap: "clamp".into(),
             aov: None,
+            denoise: false,
             max_depth: 6,
             ao_radius: 0.05,
             reference: None,
@@ -549,7 +554,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         )?;
     settings.max_depth = a.max_depth;
     settings.ao_radius = a.ao_radius;
-    settings.aovs = aovs;
+    settings.aovs = aovs || a.denoise;
     settings.frame_deadline = a.deadline.map(Duration::from_millis);
     // Frames against a deadline answer rays from resident stand-ins rather than wait.
     settings.stand_in = a.deadline.is_some();
@@ -594,6 +599,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         return save(&img, &a.out, exr, a.exposure, curve);
     }
     bars.stage("frames", stop.frames.filter(|_| stop.time.is_none()).unwrap_or(0) as u64);
+    let denoise = a.denoise;
     let t = Instant::now();
     let acc = pool.install(|| {
         render_progressive(&renderer, &tracer, stop, |acc| {
@@ -604,8 +610,12 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             }
             if let Some(r) = &reference {
                 let rmse = acc.image().relative_rmse(r);
+                let denoised = match acc.denoised().filter(|_| denoise) {
+                    Some(d) => format!(" denoised_rmse {:.3}%", 100.0 * d.relative_rmse(r)),
+                    None => String::new(),
+                };
                 eprintln!(
-                    "frame {} t {:.3} s rmse {:.3}% error_estimate {}",
+                    "frame {} t {:.3} s rmse {:.3}%{denoised} error_estimate {}",
                     acc.frames(),
                     t.elapsed().as_secs_f64(),
                     100.0 * rmse,
@@ -619,7 +629,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     if let Some(e) = scene.first_error().or_else(|| pager.as_ref().and_then(|p| p.first_error())) {
         return Err(e.into());
     }
-    let img = acc.image();
+    let img = if a.denoise { acc.denoised().expect("the frames carried AOVs") } else { acc.image() };
     if exr {
         let mut l = acc.aovs();
         if !aov_depth {
@@ -824,6 +834,9 @@ pub struct DemoArgs {
     /// Frames accumulated (1 primary sample and --light-samples shadow rays per pixel each).
     #[arg(long, default_value_t = 8)]
     frames: u32,
+    /// Save the accumulated image as it is (by default it is denoised)
+    #[arg(long)]
+    no_denoise: bool,
     /// Shadow rays per hit toward the sky's virtual lights.
     #[arg(long, value_name = "K", default_value_t = 2)]
     light_samples: u32,
@@ -908,7 +921,7 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
         paging.mem = Some((file / 3).max(need + (4 << 20)));
     }
     eprintln!(
-        "3/3 image: {}x{} under the procedural sky ({}), env shader, {} frames of 1 primary + {} light samples per pixel",
+        "3/3 image: {}x{} under the procedural sky ({}), env shader, {} frames of 1 primary + {} light samples per pixel, denoised unless --no-denoise",
         a.res.0, a.res.1, a.sky, a.frames, a.light_samples
     );
     if let Some(mem) = paging.mem {
@@ -927,6 +940,7 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     r.sky = Some(a.sky);
     r.frames = Some(a.frames.max(1));
     r.light_samples = a.light_samples;
+    r.denoise = !a.no_denoise;
     r.exposure = a.exposure;
     r.lod_error = a.lod_error;
     r.paging = paging;

@@ -67,6 +67,10 @@ pub struct ViewerArgs {
     /// resolution, accumulated frames, seconds, Mrays/s, resident bytes, tiles in flight.
     #[arg(long, value_name = "FILE")]
     pub log: Option<PathBuf>,
+    /// Show still frames as they accumulate, not denoised (by default an edge-avoiding filter
+    /// guided by the first hits' albedo, normal and depth smooths them until they converge)
+    #[arg(long)]
+    pub no_denoise: bool,
     #[command(flatten)]
     pub paging: crate::paging::PagingArgs,
     #[command(flatten)]
@@ -100,6 +104,7 @@ impl ViewerArgs {
             sky: Some(Arc::new(Environment::new(map, Environment::DEFAULT_LIGHTS, Environment::DEFAULT_SUBSETS))),
             sky_on: self.env.is_some() || self.sky.is_some(),
             frame_budget: Some(Duration::from_millis(self.frame_budget)),
+            denoise: !self.no_denoise,
             ..ViewOptions::new(w, h)
         })
     }

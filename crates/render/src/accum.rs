@@ -167,6 +167,49 @@ impl Accumulator {
         }
     }
 
+    /// Per pixel, the variance of the mean luminance (its squared standard error, from the
+    /// spread of the frames that finished it); `None` before the second frame.
+    pub fn variance_of_mean(&self) -> Option<Vec<f32>> {
+        if self.frames < 2 {
+            return None;
+        }
+        let v = self
+            .sum
+            .par_iter()
+            .zip(&self.lum_sq)
+            .zip(&self.counts)
+            .map(|((s, q), &k)| {
+                if k < 2 {
+                    return 0.0;
+                }
+                let n = k as f64;
+                let mean = luminance(megaray_base::Vec3::new(s[0] as f32, s[1] as f32, s[2] as f32)) as f64 / n;
+                (((q / n - mean * mean) * n / (n - 1.0)).max(0.0) / n) as f32
+            })
+            .collect();
+        Some(v)
+    }
+
+    /// The mean image through the denoiser ([`crate::denoise`]), guided by the AOVs (render
+    /// with `settings.aovs`); `None` when the frames had none.
+    pub fn denoised(&self) -> Option<Image> {
+        let aovs = self.aovs();
+        let (depth, normal, albedo) = (aovs.depth?, aovs.normal?, aovs.albedo?);
+        let img = self.image();
+        let variance = self.variance_of_mean();
+        let pixels = crate::denoise(&crate::DenoiseInput {
+            width: self.width,
+            height: self.height,
+            color: &img.pixels,
+            variance: variance.as_deref(),
+            frames: self.frames,
+            albedo: &albedo,
+            normal: &normal,
+            depth: &depth,
+        });
+        Some(Image { pixels, ..img })
+    }
+
     /// The frame loops' statistics, summed over the frames added (pixels finished and
     /// not, suspensions, time threads waited for tiles).
     pub fn jobs(&self) -> JobStats {

@@ -58,6 +58,7 @@
 #![warn(missing_docs)]
 
 mod accum;
+mod denoise;
 mod env;
 mod frame;
 mod governor;
@@ -73,6 +74,7 @@ mod sky;
 mod world;
 
 pub use accum::{render_progressive, Accumulator, Stop};
+pub use denoise::{denoise, DenoiseInput};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
 pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, SampleOut, TILE};
 pub use governor::LodGovernor;

@@ -45,6 +45,10 @@ pub struct ViewOptions {
     pub frame_budget: Option<Duration>,
     /// Frames accumulated at most while the camera stands still (then the view idles).
     pub max_frames: u32,
+    /// Show still frames through the denoiser ([`megaray_render::denoise`]; still frames
+    /// then carry the albedo, normal and depth it needs). [`ViewCore::image`] stays the plain
+    /// accumulated picture.
+    pub denoise: bool,
 }
 
 impl ViewOptions {
@@ -61,6 +65,7 @@ impl ViewOptions {
             sky_on: false,
             frame_budget: Some(Duration::from_millis(100)),
             max_frames: 1024,
+            denoise: true,
         }
     }
 }
@@ -281,6 +286,7 @@ impl<'t, 's> ViewCore<'t, 's> {
             _ => (w, h),
         };
         self.renderer.settings.camera = self.cam.pose.camera(self.opts.fov, rw, rh);
+        self.renderer.settings.aovs = self.opts.denoise && !moving;
         let t0 = Instant::now();
         let opts = FrameOptions {
             // Still frames take half the budget: a key pressed while one renders waits for
@@ -339,7 +345,11 @@ impl<'t, 's> ViewCore<'t, 's> {
     /// Makes the display: the picture tone mapped, the statistics line and the help over it.
     fn compose(&mut self) {
         let (w, h) = (self.opts.width, self.opts.height);
-        self.display = self.image().to_srgb8_with(&ToneMap::default());
+        let shown = match (&self.preview, self.opts.denoise) {
+            (None, true) => self.acc.denoised().unwrap_or_else(|| self.acc.image()),
+            _ => self.image(),
+        };
+        self.display = shown.to_srgb8_with(&ToneMap::default());
         let mut lines = Vec::new();
         if self.info {
             lines.push(self.stats_line());
