@@ -250,6 +250,8 @@ pub struct Environment {
     pub map: EnvMap,
     /// Its virtual lights.
     pub lights: EnvLights,
+    /// Continuous sampling of the map by brightness (the `path` shader's).
+    pub sampler: crate::env_sample::EnvSampler,
 }
 
 impl Environment {
@@ -261,7 +263,8 @@ impl Environment {
     /// `map` with `n` virtual lights in `subsets` subsets.
     pub fn new(map: EnvMap, n: u32, subsets: u32) -> Environment {
         let lights = EnvLights::from_map(&map, n, subsets);
-        Environment { map, lights }
+        let sampler = crate::env_sample::EnvSampler::new(&map);
+        Environment { map, lights, sampler }
     }
 
     /// A constant environment of radiance `c` (a small map; the lights are spread evenly

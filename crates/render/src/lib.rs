@@ -60,6 +60,7 @@
 mod accum;
 mod denoise;
 mod env;
+mod env_sample;
 mod frame;
 mod governor;
 mod image_out;
@@ -76,6 +77,7 @@ mod world;
 pub use accum::{render_progressive, Accumulator, Stop};
 pub use denoise::{denoise, DenoiseInput};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
+pub use env_sample::EnvSampler;
 pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, SampleOut, TILE};
 pub use governor::LodGovernor;
 pub use image_out::{read_exr, save_exr, srgb, srgb_by_table, Aovs, Image, ImageError, ToneCurve, ToneMap};

@@ -17,6 +17,32 @@ const G1: f64 = 0.618_033_988_749_894_9;
 const R2_A1: f64 = 0.754_877_666_246_692_7;
 const R2_A2: f64 = 0.569_840_290_998_053_3;
 
+/// Dimensions (after the first) drawn from Kronecker sequences; later ones are white noise.
+pub const KRONECKER_DIMS: usize = 17;
+
+/// The fractional parts of the square roots of the primes from 2 (5 left out: the golden
+/// ratio of the first dimension is made of its root), two per dimension after the first.
+const ROOT_STEPS: [f64; 32] = {
+    const P: [f64; 32] = [
+        2.0, 3.0, 7.0, 11.0, 13.0, 17.0, 19.0, 23.0, 29.0, 31.0, 37.0, 41.0, 43.0, 47.0, 53.0, 59.0, 61.0, 67.0, 71.0,
+        73.0, 79.0, 83.0, 89.0, 97.0, 101.0, 103.0, 107.0, 109.0, 113.0, 127.0, 131.0, 137.0,
+    ];
+    let mut out = [0.0; 32];
+    let mut i = 0;
+    while i < 32 {
+        // Newton's method in a const context (f64::sqrt is not const).
+        let mut x = P[i];
+        let mut k = 0;
+        while k < 60 {
+            x = 0.5 * (x + P[i] / x);
+            k += 1;
+        }
+        out[i] = x - (x as u64) as f64;
+        i += 1;
+    }
+    out
+};
+
 /// `x mod 1`, in `[0, 1)` as an f32 strictly below 1.
 #[inline]
 fn frac(x: f64) -> f32 {
@@ -54,8 +80,12 @@ pub fn light_subset(px: u32, py: u32, index: u32, subsets: u32) -> u32 {
     (BAYER4[(py % 4) as usize][(px % 4) as usize] + index % m + cycle_shift) % m
 }
 
-/// The random numbers of one sample: dimension after dimension of a per-pixel shifted R2 /
-/// Weyl sequence along the sample index. Cheap to create; create one per sample.
+/// The random numbers of one sample: dimension after dimension, each a per-pixel shifted
+/// Kronecker (Weyl) sequence along the sample index. The first dimension uses the golden
+/// ratio (1D) and R2 (2D); later ones the square roots of primes, so that no two dimensions
+/// are the same sequence shifted (they would be perfectly correlated, and an integral over
+/// several dimensions, such as a path of bounces, would converge to the wrong value); past
+/// [`KRONECKER_DIMS`] dimensions, hashed white noise. Cheap to create; create one per sample.
 #[derive(Clone, Debug)]
 pub struct Sampler {
     seed: u32,
@@ -69,21 +99,41 @@ impl Sampler {
         Sampler { seed: hash32(px.wrapping_mul(0x9e37_79b9) ^ hash32(py ^ 0x5bd1_e995)), index, dim: 0 }
     }
 
+    /// The sequence's step for component `k` (0 or 1) of the current dimension, or `None`
+    /// past the Kronecker dimensions.
+    fn step(&self, k: usize, two_d: bool) -> Option<f64> {
+        let d = self.dim as usize;
+        if d == 0 {
+            return Some(match (two_d, k) {
+                (false, _) => G1,
+                (true, 0) => R2_A1,
+                _ => R2_A2,
+            });
+        }
+        ROOT_STEPS.get(2 * (d - 1) + k).copied().filter(|_| d < KRONECKER_DIMS)
+    }
+
+    fn value(&self, k: usize, two_d: bool) -> f32 {
+        match self.step(k, two_d) {
+            Some(a) => frac(self.shift(k as u32) + self.index as f64 * a),
+            None => u01(hash32(self.seed ^ hash32(self.index ^ hash32(self.dim.wrapping_mul(0x27d4_eb2f) ^ k as u32)))),
+        }
+    }
+
     fn shift(&self, k: u32) -> f64 {
         u01(hash32(self.seed ^ hash32(self.dim.wrapping_mul(0x68e3_1da4).wrapping_add(k)))) as f64
     }
 
     /// The next value in `[0, 1)`.
     pub fn next_1d(&mut self) -> f32 {
-        let v = frac(self.shift(0) + self.index as f64 * G1);
+        let v = self.value(0, false);
         self.dim += 1;
         v
     }
 
     /// The next pair of values in `[0, 1)^2`.
     pub fn next_2d(&mut self) -> (f32, f32) {
-        let i = self.index as f64;
-        let v = (frac(self.shift(0) + i * R2_A1), frac(self.shift(1) + i * R2_A2));
+        let v = (self.value(0, true), self.value(1, true));
         self.dim += 1;
         v
     }
@@ -92,6 +142,35 @@ impl Sampler {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn root_steps_are_the_roots_fractions() {
+        let p = [2.0f64, 3.0, 7.0, 11.0, 13.0, 17.0, 19.0, 23.0, 29.0, 31.0, 37.0, 41.0, 43.0, 47.0, 53.0, 59.0];
+        for (i, p) in p.iter().enumerate() {
+            assert!((ROOT_STEPS[i] - p.sqrt().fract()).abs() < 1e-12, "{p}");
+        }
+    }
+
+    /// No dimension is another shifted: the difference of two dimensions (mod 1) changes with
+    /// the sample index, and pairs of dimensions fill the square (each of 8x8 cells gets its
+    /// share over 4096 samples).
+    #[test]
+    fn dimensions_are_not_shifted_copies_of_each_other() {
+        for (a, b) in [(0usize, 1usize), (1, 2), (2, 7), (5, 16), (16, 17), (17, 30)] {
+            let mut cells = [0u32; 64];
+            let mut diffs = Vec::new();
+            for i in 0..4096 {
+                let mut s = Sampler::new(3, 5, i);
+                let v: Vec<f32> = (0..=b).map(|_| s.next_1d()).collect();
+                let (x, y) = (v[a], v[b]);
+                cells[(x * 8.0) as usize * 8 + (y * 8.0) as usize] += 1;
+                diffs.push((y - x).rem_euclid(1.0));
+            }
+            assert!(cells.iter().all(|&c| (40..=90).contains(&c)), "dims {a},{b}: {cells:?}");
+            let spread = diffs.iter().fold(0.0f32, |m, &d| m.max((d - diffs[0]).abs()));
+            assert!(spread > 0.5, "dims {a},{b} move together");
+        }
+    }
 
     #[test]
     fn pixel_centre_first_and_values_in_range() {

@@ -101,11 +101,15 @@ pub enum Builtin {
     /// base colour, a specular colour with a shininess is Phong, anything else diffuse (under
     /// the environment when there is one).
     Auto,
+    /// Global illumination: paths of diffuse, glossy, mirror and glass bounces (materials as
+    /// `auto` reads them) with next-event estimation of the environment's virtual lights at
+    /// every surface, Russian roulette and the depth limit (`shaders::path`).
+    Path,
 }
 
 impl Builtin {
     /// Every built-in, with its name.
-    pub const ALL: [(&'static str, Builtin); 8] = [
+    pub const ALL: [(&'static str, Builtin); 9] = [
         ("normal", Builtin::Normal),
         ("diffuse", Builtin::Diffuse),
         ("phong", Builtin::Phong),
@@ -114,6 +118,7 @@ impl Builtin {
         ("ao", Builtin::Ao),
         ("env", Builtin::Env),
         ("auto", Builtin::Auto),
+        ("path", Builtin::Path),
     ];
 
     /// The name `--shader` takes.

@@ -178,10 +178,19 @@ impl<'a> ShadeCtx<'a> {
     /// The radiance arriving along `ray`: its closest hit shaded by the sample's shader, or
     /// the environment where it misses. Beyond `max_depth` nested calls it returns black.
     pub fn trace(&mut self, ray: &Ray) -> Result<Vec3, Suspended> {
+        self.trace_bounce(ray, 1.0)
+    }
+
+    /// [`ShadeCtx::trace`] for a path's bounce: where it misses, the environment it sees times
+    /// `env_weight` (the bounce's weight in multiple importance sampling against next-event
+    /// estimation of the same light; 1 for a specular bounce, which no shadow ray can stand for).
+    pub fn trace_bounce(&mut self, ray: &Ray, env_weight: f32) -> Result<Vec3, Suspended> {
         if self.depth >= self.world.settings.max_depth {
             return Ok(Vec3::ZERO);
         }
-        let Some(hit) = self.intersect(ray)? else { return Ok(self.background(ray.dir)) };
+        let Some(hit) = self.intersect(ray)? else {
+            return Ok(if env_weight > 0.0 { self.background(ray.dir) * env_weight } else { Vec3::ZERO });
+        };
         let sh = SurfaceHit::new(self.scene(), ray, hit);
         let shader = self.shader;
         self.depth += 1;

@@ -9,6 +9,9 @@ use crate::material::Material;
 use crate::settings::Builtin;
 use crate::shader::{ShadeCtx, Shader, SurfaceHit};
 
+mod path;
+pub use path::path;
+
 impl Shader for Builtin {
     fn shade(&self, ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
         match self {
@@ -22,6 +25,7 @@ impl Shader for Builtin {
                 let a = ctx.material(hit).albedo;
                 ctx.env_direct(hit, |_| a / PI)
             }
+            Builtin::Path => path(ray, hit, ctx),
             Builtin::Auto => {
                 let m = ctx.material(hit);
                 if m.opacity < 1.0 {
@@ -62,7 +66,7 @@ pub fn phong(hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>, m: &Material) -> Result<V
     Ok(kd * ctx.ambient() + ctx.direct(hit, brdf)?)
 }
 
-fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+pub(crate) fn reflect(d: Vec3, n: Vec3) -> Vec3 {
     d - n * (2.0 * d.dot(n))
 }
 

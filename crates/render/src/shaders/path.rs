@@ -1,0 +1,123 @@
+//! The `path` shader: global illumination by path tracing.
+//!
+//! At every surface a path meets, direct light comes by next-event estimation from the
+//! environment (the `--env` map or the constant sky colour, the sun of a procedural sky
+//! included): `light_samples` shadow rays (at least one) toward directions drawn from the map
+//! in proportion to its brightness ([`crate::EnvSampler`]; continuous, not the fixed virtual
+//! lights of the direct-only shaders, whose fixed set would bias every point by what few of
+//! them it sees). Then one bounce continues the path: a cosine-distributed direction for
+//! diffuse and glossy surfaces (weighted by the BRDF over the density, so a glossy lobe is
+//! estimated without bias), the mirror or refracted direction for mirrors and glass. A
+//! diffuse or glossy bounce that escapes sees the environment too: the two estimates of the
+//! same light are combined by multiple importance sampling (the power heuristic), a specular
+//! bounce's by itself. Russian roulette ends paths from the third surface on with probability
+//! one minus the surface's reflectance, and `--max-depth` bounds them. Materials as the `auto`
+//! shader reads them.
+
+use std::f32::consts::PI;
+
+use megaray_base::{Ray, Vec3};
+use megaray_trace::Suspended;
+
+use super::{cosine_dir, reflect};
+use crate::shader::{ShadeCtx, SurfaceHit};
+
+/// The radiance leaving `hit` toward the ray's origin.
+pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
+    let m = ctx.material(hit);
+    if m.opacity < 1.0 {
+        return glass(ray, hit, ctx);
+    }
+    if m.metallic >= 0.5 {
+        return specular_bounce(hit, ctx, reflect_dir(ray, hit), m.albedo);
+    }
+    let kd = m.albedo / PI;
+    let wo = hit.wo;
+    let n = hit.ns;
+    let glossy = m.specular != Vec3::ZERO && m.shininess > 0.0;
+    let (ks, ns) = (m.specular, m.shininess);
+    let norm = (ns + 8.0) / (8.0 * PI);
+    let brdf = |l: Vec3| {
+        if glossy {
+            let h = (l + wo).normalize_or_zero();
+            kd + ks * (norm * n.dot(h).max(0.0).powf(ns))
+        } else {
+            kd
+        }
+    };
+    let env = &ctx.world().environment().sampler;
+    let k = ctx.settings().light_samples.max(1);
+    let mut out = Vec3::ZERO;
+    let u0 = ctx.next_1d();
+    for j in 0..k {
+        let (v, w) = ctx.next_2d();
+        let Some((d, pdf_l)) = env.sample((j as f32 + u0) / k as f32, v, w) else { break };
+        let cos = n.dot(d);
+        if cos <= 0.0 || hit.ng.dot(d) <= 0.0 {
+            continue;
+        }
+        let f = brdf(d);
+        let pdf_b = cos / PI;
+        let (pl, pb) = (k as f32 * pdf_l, pdf_b);
+        let mis = pl * pl / (pl * pl + pb * pb);
+        if !ctx.occluded(&ctx.spawn(hit, d))? {
+            out += f * ctx.background(d) * (cos * mis / pl);
+        }
+    }
+    // The bounce: BRDF times cosine over the cosine density (cos / pi).
+    let (u1, u2) = ctx.next_2d();
+    let d = cosine_dir(n, u1, u2);
+    if d.dot(hit.ng) <= 0.0 {
+        return Ok(out);
+    }
+    let mut weight = brdf(d) * PI;
+    if ctx.depth() >= 3 {
+        let q = weight.max_element().min(1.0);
+        if ctx.next_1d() >= q {
+            return Ok(out);
+        }
+        weight /= q;
+    }
+    // Where it escapes, the environment it sees, weighted against the light samples.
+    let (pb, pl) = (n.dot(d).max(0.0) / PI, k as f32 * env.pdf(d));
+    let mis = if pb > 0.0 { pb * pb / (pb * pb + pl * pl) } else { 0.0 };
+    out += weight * ctx.trace_bounce(&ctx.spawn(hit, d), mis)?;
+    Ok(out)
+}
+
+fn reflect_dir(ray: &Ray, hit: &SurfaceHit) -> Vec3 {
+    let d = ray.dir.normalize();
+    let r = reflect(d, hit.ns);
+    if r.dot(hit.ng) <= 0.0 {
+        reflect(d, hit.ng)
+    } else {
+        r
+    }
+}
+
+/// A specular bounce in direction `d` with reflectance `tint`: what it hits, or the
+/// environment it sees.
+fn specular_bounce(hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>, d: Vec3, tint: Vec3) -> Result<Vec3, Suspended> {
+    Ok(tint * ctx.trace_bounce(&ctx.spawn(hit, d), 1.0)?)
+}
+
+/// Clear glass of index 1.5 (as the `glass` shader), its bounces continuing the path.
+fn glass(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
+    const IOR: f32 = 1.5;
+    let d = ray.dir.normalize();
+    let n = hit.ns;
+    let eta = if hit.front { 1.0 / IOR } else { IOR };
+    let cos_i = (-d.dot(n)).clamp(0.0, 1.0);
+    let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
+    let r0 = ((1.0 - IOR) / (1.0 + IOR)).powi(2);
+    let fresnel = if sin2_t >= 1.0 { 1.0 } else { r0 + (1.0 - r0) * (1.0 - cos_i).powi(5) };
+    if ctx.next_1d() < fresnel {
+        return specular_bounce(hit, ctx, reflect_dir(ray, hit), Vec3::ONE);
+    }
+    let cos_t = (1.0 - sin2_t).sqrt();
+    let mut t = d * eta + n * (eta * cos_i - cos_t);
+    if t.dot(hit.ng) >= 0.0 {
+        t = d;
+    }
+    specular_bounce(hit, ctx, t.normalize(), Vec3::ONE)
+}
