@@ -16,10 +16,13 @@
 //! metallic and roughness factors, and the base colour texture's URI (resolved against the
 //! file's folder; embedded images have none).
 //!
-//! Everything that touches the [`gltf`] crate runs under `catch_unwind` (the sink
-//! does not), so a malformed file that makes the crate panic becomes an [`ImportError`]. The
-//! node hierarchy must be a tree (no node with two parents, no cycles).
+//! Everything that touches the [`gltf`] crate runs under [`guarded`] (the sink does not): a
+//! malformed file that makes the crate panic (fuzzing found index and `unreachable!` panics in
+//! its validation and accessors) becomes an [`ImportError`] of one line, and the panic hook
+//! stays silent for it (no message, no backtrace). The node hierarchy must be a tree (no node
+//! with two parents, no cycles).
 
+use std::cell::Cell;
 use std::fs::File;
 use std::io::Read;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -30,6 +33,33 @@ use glam::{Mat3, Mat4, Vec3};
 use megaray_base::Progress;
 
 use crate::{ImportError, ImportSummary, Material, TriAttr, TriangleSink, NO_MATERIAL};
+
+thread_local! {
+    /// Set while this thread runs [`guarded`] code: its panics are ours to report.
+    static QUIET: Cell<bool> = const { Cell::new(false) };
+}
+
+/// Runs `f` (code that calls into the gltf crate), catching a panic: `Err` holds its message.
+/// The process's panic hook is wrapped once so that it says nothing for a panic caught here
+/// (and everything, as before, for any other).
+fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    static WRAP: std::sync::Once = std::sync::Once::new();
+    WRAP.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !QUIET.with(Cell::get) {
+                previous(info)
+            }
+        }));
+    });
+    QUIET.with(|q| q.set(true));
+    let r = catch_unwind(AssertUnwindSafe(f));
+    QUIET.with(|q| q.set(false));
+    r.map_err(|p| {
+        let msg = p.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| p.downcast_ref::<String>().cloned());
+        msg.unwrap_or_else(|| "a panic".into()).chars().take(120).collect()
+    })
+}
 
 /// The vertex data of one primitive, read from the buffers.
 struct PrimData {
@@ -71,23 +101,23 @@ pub(crate) fn import(
         }
     }
     let base = path.parent().unwrap_or(Path::new("."));
-    let loaded = catch_unwind(AssertUnwindSafe(|| {
+    let loaded = guarded(|| {
         let g = ::gltf::Gltf::from_slice(&data)?;
         let buffers = ::gltf::import_buffers(&g.document, Some(base), g.blob)?;
         Ok::<_, ::gltf::Error>((g.document, buffers))
-    }));
+    });
     let (doc, buffers) = match loaded {
         Ok(Ok(x)) => x,
         Ok(Err(e)) => return Err(err(None, format!("invalid glTF: {e}"))),
-        Err(_) => return Err(err(None, "malformed glTF (the parser failed)".into())),
+        Err(p) => return Err(err(None, format!("malformed glTF (the parser failed: {p})"))),
     };
     drop(data);
 
     // Phase 1, all under `catch_unwind`: where each mesh goes, the materials.
-    let plan = match catch_unwind(AssertUnwindSafe(|| plan(&doc, base))) {
+    let plan = match guarded(|| plan(&doc, base)) {
         Ok(Ok(p)) => p,
         Ok(Err((loc, msg))) => return Err(err(loc, msg)),
-        Err(_) => return Err(err(None, "malformed glTF (the reader failed)".into())),
+        Err(p) => return Err(err(None, format!("malformed glTF (the reader failed: {p})"))),
     };
 
     // Phase 2: read and emit each mesh instance.
@@ -102,10 +132,10 @@ pub(crate) fn import(
                 skipped += 1;
                 continue;
             }
-            let d = match catch_unwind(AssertUnwindSafe(|| read_primitive(&doc, mi, pi, &buffers))) {
+            let d = match guarded(|| read_primitive(&doc, mi, pi, &buffers)) {
                 Ok(Ok(d)) => d,
                 Ok(Err(msg)) => return Err(err(loc(), msg)),
-                Err(_) => return Err(err(loc(), "malformed primitive (the glTF reader failed)".into())),
+                Err(p) => return Err(err(loc(), format!("malformed primitive (the glTF reader failed: {p})"))),
             };
             let material = match material {
                 Some(i) if i < declared.len() => {
