@@ -68,10 +68,30 @@ impl EnvMap {
             .map_err(|e| err(e.to_string()))?
             .with_guessed_format()
             .map_err(|e| err(e.to_string()))?;
-        match reader.format() {
-            Some(image::ImageFormat::Hdr) | Some(image::ImageFormat::OpenExr) => {}
+        let is_exr = match reader.format() {
+            Some(image::ImageFormat::Hdr) => false,
+            Some(image::ImageFormat::OpenExr) => true,
             _ => return Err(err("not a Radiance .hdr or OpenEXR .exr file".into())),
+        };
+        // Sizes from the header are checked before anything is allocated from them: at most
+        // 2^28 pixels, and at most 1,024 per byte of the file (no real compression packs
+        // more; a lying header would otherwise make the decoder allocate gigabytes).
+        let len = std::fs::metadata(path).map_err(|e| err(e.to_string()))?.len();
+        let (w, h) = reader.into_dimensions().map_err(|e| err(format!("malformed header ({e})")))?;
+        let pixels = w as u64 * h as u64;
+        if pixels > (1 << 28) || pixels > len.saturating_mul(1024) {
+            return Err(err(format!("the header claims {w}x{h} pixels, more than a {len}-byte file can hold")));
         }
+        if is_exr {
+            check_exr_sizes(path, len).map_err(err)?;
+        }
+        let mut reader = image::ImageReader::open(path)
+            .map_err(|e| err(e.to_string()))?
+            .with_guessed_format()
+            .map_err(|e| err(e.to_string()))?;
+        let mut limits = image::Limits::default();
+        limits.max_alloc = Some(pixels * 32 + (64 << 20));
+        reader.limits(limits);
         let img = reader.decode().map_err(|e| err(format!("malformed or truncated image data ({e})")))?.into_rgb32f();
         let (width, height) = img.dimensions();
         if width == 0 || height == 0 {
@@ -141,6 +161,33 @@ impl EnvMap {
         }
         Vec3::new(sum[0] as f32, sum[1] as f32, sum[2] as f32) * self.scale
     }
+}
+
+/// Checks an OpenEXR file's header before its pixels are decoded: the bytes its layers (and
+/// any one tile) claim to hold, uncompressed, must fit in 1,024 per byte of the file and in
+/// 4 GiB. The decoder allocates what a block claims; a lying header would make it allocate
+/// gigabytes (fuzzing found such files).
+pub(crate) fn check_exr_sizes(path: &Path, len: u64) -> Result<(), String> {
+    let meta =
+        exr::meta::MetaData::read_from_file(path, false).map_err(|e| format!("malformed OpenEXR header ({e})"))?;
+    let bound = (len as u128 * 1024).min(4 << 30);
+    let mut total = 0u128;
+    for h in meta.headers.iter() {
+        let bpp = h.channels.list.iter().map(|c| c.sample_type.bytes_per_sample() as u128).sum::<u128>();
+        total += h.layer_size.0 as u128 * h.layer_size.1 as u128 * bpp;
+        if let exr::meta::BlockDescription::Tiles(t) = &h.blocks {
+            if t.tile_size.0 as u128 * t.tile_size.1 as u128 * bpp > bound {
+                return Err(format!(
+                    "a tile of {}x{} pixels is more than the file can hold",
+                    t.tile_size.0, t.tile_size.1
+                ));
+            }
+        }
+    }
+    if total > bound {
+        return Err(format!("the header claims {total} bytes of pixels, more than a {len}-byte file can hold"));
+    }
+    Ok(())
 }
 
 /// The unit direction at polar angle `theta` (from +Y) and azimuth `phi` (from +X toward +Z).

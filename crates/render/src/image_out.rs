@@ -255,6 +255,8 @@ pub fn save_exr(img: &Image, aovs: Option<&Aovs>, path: &Path) -> Result<(), Ima
 pub fn read_exr(path: &Path) -> Result<(Image, Aovs), ImageError> {
     use exr::prelude::read_first_flat_layer_from_file;
     let err = |msg: String| ImageError { path: path.to_path_buf(), msg };
+    let len = std::fs::metadata(path).map_err(|e| err(e.to_string()))?.len();
+    crate::env::check_exr_sizes(path, len).map_err(err)?;
     let img = read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
     let layer = &img.layer_data;
     let (w, h) = (layer.size.0, layer.size.1);

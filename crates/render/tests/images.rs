@@ -80,3 +80,26 @@ fn png_is_the_tone_mapped_buffer() {
         assert_eq!(srgb_by_table(x), srgb(x), "at {x}");
     }
 }
+
+/// Environment maps the fuzzer (fuzz/, target `env`) found making the decoder allocate
+/// gigabytes from a lying header: each is now one line of error naming the file (or loads).
+#[test]
+fn environment_maps_found_by_fuzzing_are_one_line_errors() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz/env");
+    let mut n = 0;
+    for f in std::fs::read_dir(&dir).unwrap() {
+        let path = f.unwrap().path();
+        n += 1;
+        if let Err(e) = EnvMap::load(&path) {
+            let msg = e.to_string();
+            assert_eq!(msg.lines().count(), 1, "{msg}");
+            assert!(msg.contains(&*path.to_string_lossy()), "{msg}");
+        }
+        if path.extension().is_some_and(|e| e == "exr") {
+            if let Err(e) = read_exr(&path) {
+                assert_eq!(e.to_string().lines().count(), 1, "{e}");
+            }
+        }
+    }
+    assert!(n >= 22, "only {n} inputs");
+}
