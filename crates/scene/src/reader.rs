@@ -389,7 +389,8 @@ impl Scene {
                 return Err(bad(format!("part {i}: {} slots cannot hold {} triangles", n, p.tri_count)));
             }
             for (off, size) in [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)] {
-                if off != 0 && (!off.is_multiple_of(4) || range(off, n * size, len).is_none()) {
+                let fits = n.checked_mul(size).and_then(|bytes| range(off, bytes, len)).is_some();
+                if off != 0 && (!off.is_multiple_of(4) || !fits) {
                     return Err(bad(format!("part {i}: attribute array lies outside the file")));
                 }
             }

@@ -295,3 +295,35 @@ fn tiles_out_of_file_order_are_refused() {
     let msg = e.to_string();
     assert!(msg.contains("overlap.mray") && msg.contains("tile 1") && msg.contains("file order"), "{msg}");
 }
+
+/// Scene files the fuzzer (fuzz/, target `scene`, checksums off) found crashing the table
+/// checks (an attribute array of 2^62 slots overflowed the size computation), their checksums
+/// made right again so that they reach those checks: each is refused with one line.
+#[test]
+fn scene_files_found_by_fuzzing_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let found = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/fuzz");
+    let mut n = 0;
+    for f in std::fs::read_dir(&found).unwrap() {
+        let mut b = std::fs::read(f.unwrap().path()).unwrap();
+        if b.len() < 256 {
+            continue;
+        }
+        let h: Header = bytemuck::pod_read_unaligned(&b[..256]);
+        let tables = [
+            (h.top_nodes_off, h.top_node_count as u64 * 256),
+            (h.parts_off, h.part_count as u64 * 128),
+            (h.tiles_off, h.tile_count as u64 * 40),
+            (h.materials_off, h.materials_bytes),
+        ];
+        if tables.iter().all(|&(o, l)| o.checked_add(l).is_some_and(|e| e <= b.len() as u64)) {
+            fix_checksums(&mut b);
+        }
+        let path = dir.path().join(format!("found-{n}.mray"));
+        std::fs::write(&path, &b).unwrap();
+        let e = Scene::open(&path).err().expect("a damaged scene opened");
+        assert_eq!(e.to_string().lines().count(), 1, "{e}");
+        n += 1;
+    }
+    assert!(n >= 5);
+}
