@@ -134,6 +134,15 @@ impl EnvMap {
         top.lerp(bottom, ty) * self.scale
     }
 
+    /// The radiance of the pixel that holds direction `d` (normalised), unfiltered.
+    pub fn eval_pixel(&self, d: Vec3) -> Vec3 {
+        let theta = d.y.clamp(-1.0, 1.0).acos();
+        let phi = (d.z.atan2(d.x) - self.rotate).rem_euclid(2.0 * PI);
+        let x = ((phi / (2.0 * PI) * self.width as f32) as u32).min(self.width - 1);
+        let y = ((theta / PI * self.height as f32) as u32).min(self.height - 1);
+        Vec3::from(self.pixels[(y * self.width + x) as usize]) * self.scale
+    }
+
     /// The solid angle of a pixel of row `y`.
     pub fn pixel_solid_angle(&self, y: u32) -> f32 {
         let (c0, c1) = self.row_cos(y);

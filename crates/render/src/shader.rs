@@ -178,18 +178,24 @@ impl<'a> ShadeCtx<'a> {
     /// The radiance arriving along `ray`: its closest hit shaded by the sample's shader, or
     /// the environment where it misses. Beyond `max_depth` nested calls it returns black.
     pub fn trace(&mut self, ray: &Ray) -> Result<Vec3, Suspended> {
-        self.trace_bounce(ray, 1.0)
+        self.trace_bounce(ray, None)
     }
 
-    /// [`ShadeCtx::trace`] for a path's bounce: where it misses, the environment it sees times
-    /// `env_weight` (the bounce's weight in multiple importance sampling against next-event
-    /// estimation of the same light; 1 for a specular bounce, which no shadow ray can stand for).
-    pub fn trace_bounce(&mut self, ray: &Ray, env_weight: f32) -> Result<Vec3, Suspended> {
+    /// [`ShadeCtx::trace`] for a path's bounce. Where it misses: with `env_weight` `None`, the
+    /// environment as the camera sees it (a specular bounce, which no shadow ray can stand
+    /// for); with `Some(w)`, the environment's pixel in that direction ([`ShadeCtx::environment_pixel`],
+    /// the radiance light sampling integrates) times `w`, the bounce's weight in multiple
+    /// importance sampling against next-event estimation of the same light.
+    pub fn trace_bounce(&mut self, ray: &Ray, env_weight: Option<f32>) -> Result<Vec3, Suspended> {
         if self.depth >= self.world.settings.max_depth {
             return Ok(Vec3::ZERO);
         }
         let Some(hit) = self.intersect(ray)? else {
-            return Ok(if env_weight > 0.0 { self.background(ray.dir) * env_weight } else { Vec3::ZERO });
+            return Ok(match env_weight {
+                None => self.background(ray.dir),
+                Some(w) if w > 0.0 => self.environment_pixel(ray.dir) * w,
+                Some(_) => Vec3::ZERO,
+            });
         };
         let sh = SurfaceHit::new(self.scene(), ray, hit);
         let shader = self.shader;
@@ -199,6 +205,17 @@ impl<'a> ShadeCtx<'a> {
         self.leave(before);
         self.depth -= 1;
         c
+    }
+
+    /// The radiance of the environment's pixel in direction `dir` (constant over the pixel:
+    /// what [`crate::EnvSampler`] samples; the camera sees the map interpolated, and light
+    /// sampling of an interpolated sun would put its edge into dim pixels of low density).
+    pub fn environment_pixel(&self, dir: Vec3) -> Vec3 {
+        if self.world.has_environment() {
+            self.world.environment().map.eval_pixel(dir.normalize_or_zero())
+        } else {
+            self.background(dir)
+        }
     }
 
     /// What a ray leaving in direction `dir` sees when it hits nothing.

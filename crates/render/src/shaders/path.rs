@@ -61,7 +61,7 @@ pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3,
         let (pl, pb) = (k as f32 * pdf_l, pdf_b);
         let mis = pl * pl / (pl * pl + pb * pb);
         if !ctx.occluded(&ctx.spawn(hit, d))? {
-            out += f * ctx.background(d) * (cos * mis / pl);
+            out += f * ctx.environment_pixel(d) * (cos * mis / pl);
         }
     }
     // The bounce: BRDF times cosine over the cosine density (cos / pi).
@@ -81,7 +81,7 @@ pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3,
     // Where it escapes, the environment it sees, weighted against the light samples.
     let (pb, pl) = (n.dot(d).max(0.0) / PI, k as f32 * env.pdf(d));
     let mis = if pb > 0.0 { pb * pb / (pb * pb + pl * pl) } else { 0.0 };
-    out += weight * ctx.trace_bounce(&ctx.spawn(hit, d), mis)?;
+    out += weight * ctx.trace_bounce(&ctx.spawn(hit, d), Some(mis))?;
     Ok(out)
 }
 
@@ -98,7 +98,7 @@ fn reflect_dir(ray: &Ray, hit: &SurfaceHit) -> Vec3 {
 /// A specular bounce in direction `d` with reflectance `tint`: what it hits, or the
 /// environment it sees.
 fn specular_bounce(hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>, d: Vec3, tint: Vec3) -> Result<Vec3, Suspended> {
-    Ok(tint * ctx.trace_bounce(&ctx.spawn(hit, d), 1.0)?)
+    Ok(tint * ctx.trace_bounce(&ctx.spawn(hit, d), None)?)
 }
 
 /// Clear glass of index 1.5 (as the `glass` shader), its bounces continuing the path.
