@@ -215,11 +215,16 @@ pub fn build_scene(
             temp_dir: tmp.path().to_path_buf(),
         };
         sink.set_input(input);
+        let dropped_before = sink.dropped();
         let s = match megaray_import::import_file(input, &iopts, &mut sink, progress) {
             Ok(s) => s,
             // A failure of our own (disk full, cancelled) outranks the reader's view of it.
             Err(e) => return Err(sink.take_error().unwrap_or(e.into())),
         };
+        let dropped = sink.dropped() - dropped_before;
+        if dropped > 0 {
+            progress.note(&format!("{}: skipped {dropped} degenerate (zero-area) triangles", input.display()));
+        }
         input_bytes += s.bytes;
         check_cancel(opts)?;
     }

@@ -36,6 +36,11 @@ impl<'a> BuildSink<'a> {
         })
     }
 
+    /// Degenerate triangles dropped so far (the build notes each input's share).
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
     /// Names the input whose triangles come next.
     pub fn set_input(&mut self, path: &Path) {
         self.input = path.to_path_buf();

@@ -53,6 +53,12 @@ impl PagingArgs {
     }
 }
 
+/// The first fault found in the scene's tiles (damaged, or unreadable because the file was
+/// truncated under us), by the scene or its pager: a front end ends with it as an error.
+pub fn fault(tracer: &megaray_trace::Tracer) -> Option<megaray_scene::SceneError> {
+    tracer.scene().first_error().or_else(|| tracer.pager().and_then(|p| p.first_error()))
+}
+
 /// Bytes this process has caused to be read from storage (`/proc/self/io`), if known.
 pub fn read_bytes() -> Option<u64> {
     let s = std::fs::read_to_string("/proc/self/io").ok()?;

@@ -214,6 +214,11 @@ impl Server<'_, '_> {
             let dt = last.elapsed().as_secs_f32().min(0.25);
             last = Instant::now();
             busy = v.step(dt);
+            if let Some(e) = crate::paging::fault(self.tracer) {
+                // The scene is damaged for every page: the server ends, with one line.
+                eprintln!("megaray: error: {e}");
+                std::process::exit(1);
+            }
             fresh |= busy;
             if fresh && unacked < MAX_UNACKED {
                 let s = v.stats();

@@ -208,6 +208,9 @@ fn window(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, name: &s
         let dt = last.elapsed().as_secs_f32().min(0.25);
         last = Instant::now();
         let rendered = view.step(dt);
+        if let Some(e) = crate::paging::fault(tracer) {
+            return Err(e.into());
+        }
         let (dw, dh, rgb) = view.display();
         buf.clear();
         buf.extend(rgb.chunks_exact(3).map(|p| (p[0] as u32) << 16 | (p[1] as u32) << 8 | p[2] as u32));
@@ -329,6 +332,9 @@ fn replay(
             Step::Frames(k) => {
                 for _ in 0..k {
                     view.step(1.0 / 30.0);
+                    if let Some(e) = crate::paging::fault(tracer) {
+                        return Err(e.into());
+                    }
                     n += 1;
                     view.image().save_png_with(&out.join(format!("frame-{n:05}.png")), &Default::default())?;
                     let line = frame_line(&view, n, None);

@@ -163,3 +163,19 @@ fn a_scene_changed_under_a_render() {
     assert!(renamed_while_running, "the render ended before the rename: make it longer");
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
 }
+
+/// A real-world OBJ with lines written as faces and a zero-area triangle builds; the notes
+/// give each count, once, naming the file.
+#[test]
+fn odd_faces_are_skipped_with_counted_notes() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("odd.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2\nf 3 1\nf 1 2 4\nl 1 3\n").unwrap();
+    let out = dir.path().join("odd.mray");
+    let (code, _, err) = run(&["build", obj.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    let notes: Vec<&str> = err.lines().filter(|l| l.contains("skipped")).collect();
+    assert_eq!(notes.len(), 2, "{err}");
+    assert!(notes.iter().any(|n| n.contains("odd.obj: skipped 2 faces with fewer than 3 vertices")), "{err}");
+    assert!(notes.iter().any(|n| n.contains("odd.obj: skipped 1 degenerate (zero-area) triangles")), "{err}");
+}
