@@ -115,6 +115,9 @@ pub struct ViewCore<'t, 's> {
     acc: Accumulator,
     /// The last frame rendered while moving, and its size.
     preview: Option<Image>,
+    /// The last denoised picture and the frames it was made of (the denoiser runs on the
+    /// first 4 still frames and every 8th after, to keep its cost off most frames).
+    denoised: Option<(u32, Image)>,
     /// The fraction of the view's width and height rendered while moving.
     scale: f32,
     governor: LodGovernor,
@@ -146,6 +149,7 @@ impl<'t, 's> ViewCore<'t, 's> {
             renderer: Renderer::new(RenderSettings::new(home.pose.camera(opts.fov, w, h)), &bounds),
             acc: Accumulator::new(w, h),
             preview: None,
+            denoised: None,
             scale: 0.5,
             governor: LodGovernor::new(tracer),
             display: vec![0; (3 * w * h) as usize],
@@ -345,9 +349,23 @@ impl<'t, 's> ViewCore<'t, 's> {
     /// Makes the display: the picture tone mapped, the statistics line and the help over it.
     fn compose(&mut self) {
         let (w, h) = (self.opts.width, self.opts.height);
+        let frames = self.acc.frames();
         let shown = match (&self.preview, self.opts.denoise) {
-            (None, true) => self.acc.denoised().unwrap_or_else(|| self.acc.image()),
-            _ => self.image(),
+            (None, true) => {
+                let stale = self.denoised.as_ref().is_none_or(|(n, _)| *n > frames || frames - n >= 8);
+                if (frames <= 4 || frames % 8 == 0 || stale) && self.denoised.as_ref().is_none_or(|(n, _)| *n != frames)
+                {
+                    self.denoised = self.acc.denoised().map(|img| (frames, img));
+                }
+                match &self.denoised {
+                    Some((_, img)) => img.clone(),
+                    None => self.acc.image(),
+                }
+            }
+            _ => {
+                self.denoised = None;
+                self.image()
+            }
         };
         self.display = shown.to_srgb8_with(&ToneMap::default());
         let mut lines = Vec::new();
