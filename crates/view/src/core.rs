@@ -353,7 +353,8 @@ impl<'t, 's> ViewCore<'t, 's> {
         let shown = match (&self.preview, self.opts.denoise) {
             (None, true) => {
                 let stale = self.denoised.as_ref().is_none_or(|(n, _)| *n > frames || frames - n >= 8);
-                if (frames <= 4 || frames % 8 == 0 || stale) && self.denoised.as_ref().is_none_or(|(n, _)| *n != frames)
+                if (frames <= 4 || frames.is_multiple_of(8) || stale)
+                    && self.denoised.as_ref().is_none_or(|(n, _)| *n != frames)
                 {
                     self.denoised = self.acc.denoised().map(|img| (frames, img));
                 }
