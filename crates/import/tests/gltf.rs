@@ -2,11 +2,9 @@
 
 mod common;
 
-use common::{assert_error, collect, import_error, Collect};
-use megaray_base::Progress;
+use common::{assert_error, collect, import_error, Collect, Notes};
 use megaray_import::{import_file, ImportOptions, Material, NO_MATERIAL};
 use std::path::Path;
-use std::sync::Mutex;
 
 fn f32s(out: &mut Vec<u8>, v: &[f32]) {
     for x in v {
@@ -82,16 +80,6 @@ fn write_scene(dir: &Path, indices: [u16; 6]) -> std::path::PathBuf {
     let path = dir.join("scene.gltf");
     std::fs::write(&path, json).unwrap();
     path
-}
-
-#[derive(Default)]
-struct Notes(Mutex<Vec<String>>);
-impl Progress for Notes {
-    fn stage(&self, _: &str, _: u64) {}
-    fn inc(&self, _: u64) {}
-    fn note(&self, msg: &str) {
-        self.0.lock().unwrap().push(msg.to_string());
-    }
 }
 
 fn p(a: &[f32], i: usize) -> [f32; 3] {

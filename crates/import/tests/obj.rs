@@ -2,10 +2,8 @@
 
 mod common;
 
-use common::{assert_error, collect, import_error, positions, Collect};
-use megaray_base::Progress;
+use common::{assert_error, collect, import_error, positions, Collect, Notes};
 use megaray_import::{import_file, ImportOptions, Material, NO_MATERIAL};
-use std::sync::Mutex;
 
 fn write(dir: &std::path::Path, name: &str, text: &str) -> std::path::PathBuf {
     let p = dir.join(name);
@@ -60,17 +58,6 @@ fn vertex_colors() {
     let white = [1.0, 1.0, 1.0, 1.0];
     assert_eq!(c.tris[0].1.color, Some([white, [1.0, 0.0, 0.0, 1.0], [0.0, 0.5, 1.0, 1.0]]));
     assert_eq!(c.tris.len(), 2);
-}
-
-/// Records notes.
-#[derive(Default)]
-struct Notes(Mutex<Vec<String>>);
-impl Progress for Notes {
-    fn stage(&self, _: &str, _: u64) {}
-    fn inc(&self, _: u64) {}
-    fn note(&self, msg: &str) {
-        self.0.lock().unwrap().push(msg.to_string());
-    }
 }
 
 #[test]

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{collect, collect_with, color_of, fan, normal_of, positions, write_ply, Enc, PlySpec};
+use common::{collect, collect_with, color_of, fan, normal_of, positions, write_ply, Enc, Notes, PlySpec};
 use megaray_import::{ImportOptions, NO_MATERIAL};
 use proptest::prelude::*;
 
@@ -202,17 +202,6 @@ fn progress_counts_the_file_bytes() {
         assert_eq!(rec.done.load(std::sync::atomic::Ordering::Relaxed), len);
         assert_eq!(s.bytes, len);
         assert!(rec.finished.load(std::sync::atomic::Ordering::Relaxed));
-    }
-}
-
-/// Records notes.
-#[derive(Default)]
-struct Notes(std::sync::Mutex<Vec<String>>);
-impl megaray_base::Progress for Notes {
-    fn stage(&self, _: &str, _: u64) {}
-    fn inc(&self, _: u64) {}
-    fn note(&self, msg: &str) {
-        self.0.lock().unwrap().push(msg.to_string());
     }
 }
 

@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::{assert_error, collect, import_error, positions};
+use common::{assert_error, collect, import_error, positions, Notes};
 
 fn tris() -> Vec<[[f32; 3]; 3]> {
     vec![
@@ -125,17 +125,6 @@ fn stl_nan_is_an_error() {
     t[1][2][1] = f32::NAN;
     std::fs::write(&path, binary(b"x", 3, &t)).unwrap();
     assert_error(&import_error(&path), "nan.stl", &["triangle 1: vertex 2 of the triangle has a NaN"]);
-}
-
-/// Records notes.
-#[derive(Default)]
-struct Notes(std::sync::Mutex<Vec<String>>);
-impl megaray_base::Progress for Notes {
-    fn stage(&self, _: &str, _: u64) {}
-    fn inc(&self, _: u64) {}
-    fn note(&self, msg: &str) {
-        self.0.lock().unwrap().push(msg.to_string());
-    }
 }
 
 /// An ascii facet of fewer than three vertices is skipped with one note giving the count.

@@ -302,3 +302,15 @@ pub fn write_ply(path: &Path, spec: &PlySpec, verts: &[[f32; 3]], faces: &[Vec<u
 pub fn positions(c: &Collect) -> Vec<[[f32; 3]; 3]> {
     c.tris.iter().map(|t| t.0).collect()
 }
+
+/// A progress sink that records the notes (warnings) a reader gives.
+#[derive(Default)]
+pub struct Notes(pub std::sync::Mutex<Vec<String>>);
+
+impl megaray_base::Progress for Notes {
+    fn stage(&self, _: &str, _: u64) {}
+    fn inc(&self, _: u64) {}
+    fn note(&self, msg: &str) {
+        self.0.lock().unwrap().push(msg.to_string());
+    }
+}

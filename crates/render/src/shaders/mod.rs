@@ -66,7 +66,7 @@ pub fn phong(hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>, m: &Material) -> Result<V
     Ok(kd * ctx.ambient() + ctx.direct(hit, brdf)?)
 }
 
-pub(crate) fn reflect(d: Vec3, n: Vec3) -> Vec3 {
+fn reflect(d: Vec3, n: Vec3) -> Vec3 {
     d - n * (2.0 * d.dot(n))
 }
 

@@ -19,17 +19,18 @@ use std::f32::consts::PI;
 use megaray_base::{Ray, Vec3};
 use megaray_trace::Suspended;
 
-use super::{cosine_dir, reflect};
+use super::{cosine_dir, glass, mirror};
 use crate::shader::{ShadeCtx, SurfaceHit};
 
 /// The radiance leaving `hit` toward the ray's origin.
 pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
     let m = ctx.material(hit);
+    // Specular bounces are the built-ins' own: they trace on, and a miss sees the environment.
     if m.opacity < 1.0 {
         return glass(ray, hit, ctx);
     }
     if m.metallic >= 0.5 {
-        return specular_bounce(hit, ctx, reflect_dir(ray, hit), m.albedo);
+        return mirror(ray, hit, ctx, m.albedo);
     }
     let kd = m.albedo / PI;
     let wo = hit.wo;
@@ -83,41 +84,4 @@ pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3,
     let mis = if pb > 0.0 { pb * pb / (pb * pb + pl * pl) } else { 0.0 };
     out += weight * ctx.trace_bounce(&ctx.spawn(hit, d), Some(mis))?;
     Ok(out)
-}
-
-fn reflect_dir(ray: &Ray, hit: &SurfaceHit) -> Vec3 {
-    let d = ray.dir.normalize();
-    let r = reflect(d, hit.ns);
-    if r.dot(hit.ng) <= 0.0 {
-        reflect(d, hit.ng)
-    } else {
-        r
-    }
-}
-
-/// A specular bounce in direction `d` with reflectance `tint`: what it hits, or the
-/// environment it sees.
-fn specular_bounce(hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>, d: Vec3, tint: Vec3) -> Result<Vec3, Suspended> {
-    Ok(tint * ctx.trace_bounce(&ctx.spawn(hit, d), None)?)
-}
-
-/// Clear glass of index 1.5 (as the `glass` shader), its bounces continuing the path.
-fn glass(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
-    const IOR: f32 = 1.5;
-    let d = ray.dir.normalize();
-    let n = hit.ns;
-    let eta = if hit.front { 1.0 / IOR } else { IOR };
-    let cos_i = (-d.dot(n)).clamp(0.0, 1.0);
-    let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
-    let r0 = ((1.0 - IOR) / (1.0 + IOR)).powi(2);
-    let fresnel = if sin2_t >= 1.0 { 1.0 } else { r0 + (1.0 - r0) * (1.0 - cos_i).powi(5) };
-    if ctx.next_1d() < fresnel {
-        return specular_bounce(hit, ctx, reflect_dir(ray, hit), Vec3::ONE);
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
-    let mut t = d * eta + n * (eta * cos_i - cos_t);
-    if t.dot(hit.ng) >= 0.0 {
-        t = d;
-    }
-    specular_bounce(hit, ctx, t.normalize(), Vec3::ONE)
 }
