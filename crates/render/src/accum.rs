@@ -193,6 +193,11 @@ impl Accumulator {
     /// The mean image through the denoiser ([`crate::denoise`]), guided by the AOVs (render
     /// with `settings.aovs`); `None` when the frames had none.
     pub fn denoised(&self) -> Option<Image> {
+        self.denoised_with(crate::denoise::PASSES)
+    }
+
+    /// [`Accumulator::denoised`] with `passes` filter passes (fewer: cheaper, for viewers).
+    pub fn denoised_with(&self, passes: u32) -> Option<Image> {
         let aovs = self.aovs();
         let (depth, normal, albedo) = (aovs.depth?, aovs.normal?, aovs.albedo?);
         let img = self.image();
@@ -206,6 +211,7 @@ impl Accumulator {
             albedo: &albedo,
             normal: &normal,
             depth: &depth,
+            passes,
         });
         Some(Image { pixels, ..img })
     }

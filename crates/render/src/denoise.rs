@@ -35,10 +35,14 @@ pub struct DenoiseInput<'a> {
     pub normal: &'a [[f32; 3]],
     /// Per pixel, the distance to the first hit (infinite where nothing was hit).
     pub depth: &'a [f32],
+    /// Filter passes, 1 to 5 (taps 1, 2, 4, 8, 16 pixels apart); fewer is cheaper and smooths
+    /// less far. [`PASSES`] by default.
+    pub passes: u32,
 }
 
 const KERNEL: [f32; 5] = [1.0 / 16.0, 1.0 / 4.0, 3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];
-const PASSES: u32 = 5;
+/// The passes of a full filtering.
+pub const PASSES: u32 = 5;
 /// Relative noise below which a pixel is left as it is, and the span over which the filter
 /// fades in above it.
 const CLEAN: f32 = 0.002;
@@ -126,7 +130,7 @@ pub fn denoise(inp: &DenoiseInput) -> Vec<[f32; 3]> {
             .collect(),
     };
     let rel_noise: Vec<f32> = (0..n).map(|i| var[i].sqrt() / lum(illum[i]).max(1e-4)).collect();
-    for pass in 0..PASSES {
+    for pass in 0..inp.passes.clamp(1, PASSES) {
         let step = 1isize << pass;
         let (next, next_var): (Vec<[f32; 3]>, Vec<f32>) = (0..n)
             .into_par_iter()
@@ -230,6 +234,7 @@ mod tests {
             albedo: &w.albedo,
             normal: &w.normal,
             depth: &w.depth,
+            passes: PASSES,
         })
     }
 

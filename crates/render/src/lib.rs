@@ -75,7 +75,7 @@ mod sky;
 mod world;
 
 pub use accum::{render_progressive, Accumulator, Stop};
-pub use denoise::{denoise, DenoiseInput};
+pub use denoise::{denoise, DenoiseInput, PASSES as DENOISE_PASSES};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
 pub use env_sample::EnvSampler;
 pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, SampleOut, TILE};

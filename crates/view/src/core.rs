@@ -51,6 +51,12 @@ pub struct ViewOptions {
     pub denoise: bool,
 }
 
+/// Whether the still frame that brings the accumulation to `frames` frames is shown denoised:
+/// the first 2 and every 16th after (the denoiser's cost kept off most frames; three passes).
+fn denoises_after(frames: u32) -> bool {
+    frames <= 2 || frames.is_multiple_of(16)
+}
+
 impl ViewOptions {
     /// A view of `width` x `height` with the defaults of `megaray render` (shader `auto`, 2
     /// light samples, 60 degrees) and a budget of 100 ms a frame.
@@ -118,6 +124,8 @@ pub struct ViewCore<'t, 's> {
     /// The last denoised picture and the frames it was made of (the denoiser runs on the
     /// first 4 still frames and every 8th after, to keep its cost off most frames).
     denoised: Option<(u32, Image)>,
+    /// How long the denoiser takes (its last time, or most of its longest recent one).
+    denoise_time: Duration,
     /// The fraction of the view's width and height rendered while moving.
     scale: f32,
     governor: LodGovernor,
@@ -150,6 +158,7 @@ impl<'t, 's> ViewCore<'t, 's> {
             acc: Accumulator::new(w, h),
             preview: None,
             denoised: None,
+            denoise_time: Duration::ZERO,
             scale: 0.5,
             governor: LodGovernor::new(tracer),
             display: vec![0; (3 * w * h) as usize],
@@ -295,7 +304,16 @@ impl<'t, 's> ViewCore<'t, 's> {
         let opts = FrameOptions {
             // Still frames take half the budget: a key pressed while one renders waits for
             // it, and then for the first moving frame (input to frame within the budget).
-            deadline: self.opts.frame_budget.map(|b| t0 + if moving { b } else { b / 2 }),
+            // A still frame that will be denoised leaves the denoiser its time (as last
+            // measured) within that half.
+            deadline: self.opts.frame_budget.map(|b| {
+                let denoise = if !moving && self.opts.denoise && denoises_after(self.acc.frames() + 1) {
+                    self.denoise_time
+                } else {
+                    Duration::ZERO
+                };
+                t0 + if moving { b } else { (b / 2).saturating_sub(denoise).max(b / 8) }
+            }),
             stand_in: self.opts.frame_budget.is_some(),
         };
         let index = if moving { 0 } else { self.acc.frames() };
@@ -352,11 +370,11 @@ impl<'t, 's> ViewCore<'t, 's> {
         let frames = self.acc.frames();
         let shown = match (&self.preview, self.opts.denoise) {
             (None, true) => {
-                let stale = self.denoised.as_ref().is_none_or(|(n, _)| *n > frames || frames - n >= 8);
+                let stale = self.denoised.as_ref().is_none_or(|(n, _)| *n > frames || frames - n >= 16);
                 if (frames <= 4 || frames.is_multiple_of(8) || stale)
                     && self.denoised.as_ref().is_none_or(|(n, _)| *n != frames)
                 {
-                    self.denoised = self.acc.denoised().map(|img| (frames, img));
+                    self.denoised = self.acc.denoised_with(3).map(|img| (frames, img));
                 }
                 match &self.denoised {
                     Some((_, img)) => img.clone(),
