@@ -19,7 +19,7 @@ use megaray_trace::Tracer;
 
 use crate::progress::Bars;
 
-fn parse_vec3(s: &str) -> Result<Vec3, String> {
+pub(crate) fn parse_vec3(s: &str) -> Result<Vec3, String> {
     let v: Vec<f32> = s
         .split(',')
         .map(|x| x.trim().parse::<f32>())

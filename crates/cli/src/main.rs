@@ -7,6 +7,7 @@ mod cmd;
 mod fault;
 mod open;
 mod paging;
+mod pick;
 mod progress;
 mod serve;
 mod view;
@@ -130,6 +131,14 @@ enum Command {
     ///   megaray serve model.glb --bind 0.0.0.0:8080    # other machines may view it
     #[command(verbatim_doc_comment)]
     Serve(serve::ServeArgs),
+    /// What lies under a pixel, exactly: one ray through the full-detail index (loading only
+    /// the tiles along it when paged); part, triangle, position, normal, distance
+    ///
+    /// Examples:
+    ///   megaray pick plant.mray --pixel 512,300 --cam-offset 0,0.3,0.6
+    ///   megaray pick plant.mray --mem 2G --eye 10,5,3 --at 0,0,0 --res 640x480 --pixel 320,240 --json
+    #[command(verbatim_doc_comment)]
+    Pick(pick::PickArgs),
 }
 
 fn main() {
@@ -149,6 +158,7 @@ fn main() {
         Command::Bench(a) => bench::bench(a, &bars),
         Command::View(a) => view::view(a, &bars),
         Command::Serve(a) => serve::serve(a, &bars),
+        Command::Pick(a) => pick::pick(a, &bars),
     };
     if let Err(e) = res {
         use megaray_base::Progress;
