@@ -345,10 +345,7 @@ fn bench_trace(loaded: &Loaded, opts: &BenchOptions, name: &str, on: &mut dyn Fn
         ),
         None => None,
     };
-    let tracer = match &pager {
-        Some(p) => Tracer::paged(p),
-        None => Tracer::new(scene),
-    };
+    let tracer = Tracer::paged_or_new(scene, pager.as_ref());
     on(Event::Info(format!(
         "camera eye ({} {} {}) at ({} {} {}), {w}x{h}",
         cam.eye.x,

@@ -77,10 +77,7 @@ pub fn pick(a: PickArgs, bars: &dyn Progress) -> Result<()> {
     // Integer pixels mean their centres.
     let (sx, sy) = if px.fract() == 0.0 && py.fract() == 0.0 { (px + 0.5, py + 0.5) } else { (px, py) };
     let ray = cam.ray(sx, sy);
-    let tracer = match &pager {
-        Some(p) => Tracer::paged(p),
-        None => Tracer::new(&scene),
-    };
+    let tracer = Tracer::paged_or_new(&scene, pager.as_ref());
     let t0 = Instant::now();
     let hit = tracer.intersect(&ray);
     let secs = t0.elapsed().as_secs_f64();

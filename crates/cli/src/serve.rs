@@ -60,11 +60,7 @@ pub fn serve(a: ServeArgs, bars: &Bars) -> Result<()> {
     }
     let opened = crate::open::scene_for(a.viewer.scene.as_deref(), &a.viewer.open, bars)?;
     let (scene, pager) = a.viewer.paging.open(&opened.path)?;
-    let tracer = match &pager {
-        Some(p) => Tracer::paged(p),
-        None => Tracer::new(&scene),
-    }
-    .with_lod_error(a.viewer.lod_error);
+    let tracer = Tracer::paged_or_new(&scene, pager.as_ref()).with_lod_error(a.viewer.lod_error);
     let pool = crate::cmd::pool(a.viewer.threads)?;
     a.viewer.options(640, 480)?; // the options' errors before listening
     let listener = TcpListener::bind(&a.bind).with_context(|| format!("--bind {}: cannot listen", a.bind))?;

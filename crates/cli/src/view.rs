@@ -160,11 +160,7 @@ fn key_of(k: minifb::Key) -> Option<Key> {
 pub fn view(a: ViewArgs, bars: &Bars) -> Result<()> {
     let opened = crate::open::scene_for(a.viewer.scene.as_deref(), &a.viewer.open, bars)?;
     let (scene, pager) = a.viewer.paging.open(&opened.path)?;
-    let tracer = match &pager {
-        Some(p) => Tracer::paged(p),
-        None => Tracer::new(&scene),
-    }
-    .with_lod_error(a.viewer.lod_error);
+    let tracer = Tracer::paged_or_new(&scene, pager.as_ref()).with_lod_error(a.viewer.lod_error);
     let pool = crate::cmd::pool(a.viewer.threads)?;
     let mut opts = a.viewer.options(a.res.0, a.res.1)?;
     let name = opened.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();

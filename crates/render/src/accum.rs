@@ -178,14 +178,7 @@ impl Accumulator {
             .par_iter()
             .zip(&self.lum_sq)
             .zip(&self.counts)
-            .map(|((s, q), &k)| {
-                if k < 2 {
-                    return 0.0;
-                }
-                let n = k as f64;
-                let mean = luminance(megaray_base::Vec3::new(s[0] as f32, s[1] as f32, s[2] as f32)) as f64 / n;
-                (((q / n - mean * mean) * n / (n - 1.0)).max(0.0) / n) as f32
-            })
+            .map(|((s, &q), &k)| mean_and_variance(s, q, k).map_or(0.0, |(_, var)| var as f32))
             .collect();
         Some(v)
     }
@@ -258,20 +251,27 @@ impl Accumulator {
         }
         let mut var_sum = 0.0;
         let mut lum_sum = 0.0;
-        for ((s, q), &k) in self.sum.iter().zip(&self.lum_sq).zip(&self.counts) {
-            if k < 2 {
-                continue;
+        for ((s, &q), &k) in self.sum.iter().zip(&self.lum_sq).zip(&self.counts) {
+            if let Some((mean, var)) = mean_and_variance(s, q, k) {
+                var_sum += var;
+                lum_sum += mean;
             }
-            let n = k as f64;
-            let mean = luminance(megaray_base::Vec3::new(s[0] as f32, s[1] as f32, s[2] as f32)) as f64 / n;
-            let var = ((q / n - mean * mean) * n / (n - 1.0)).max(0.0);
-            var_sum += var / n;
-            lum_sum += mean;
         }
         let pixels = self.sum.len().max(1) as f64;
         let mean_lum = lum_sum / pixels;
         Some(if mean_lum > 0.0 { (var_sum / pixels).sqrt() / mean_lum } else { 0.0 })
     }
+}
+
+/// A pixel's mean luminance and the variance of that mean (its squared standard error), from
+/// its colour sum `s`, its sum of squared luminance `q` and its `k` frames; `None` below two.
+fn mean_and_variance(s: &[f64; 3], q: f64, k: u32) -> Option<(f64, f64)> {
+    if k < 2 {
+        return None;
+    }
+    let n = k as f64;
+    let mean = luminance(megaray_base::Vec3::new(s[0] as f32, s[1] as f32, s[2] as f32)) as f64 / n;
+    Some((mean, ((q / n - mean * mean) * n / (n - 1.0)).max(0.0) / n))
 }
 
 /// When [`render_progressive`] stops: after `frames` frames, or once `time` has passed

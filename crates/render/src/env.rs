@@ -136,11 +136,7 @@ impl EnvMap {
 
     /// The radiance of the pixel that holds direction `d` (normalised), unfiltered.
     pub fn eval_pixel(&self, d: Vec3) -> Vec3 {
-        let theta = d.y.clamp(-1.0, 1.0).acos();
-        let phi = (d.z.atan2(d.x) - self.rotate).rem_euclid(2.0 * PI);
-        let x = ((phi / (2.0 * PI) * self.width as f32) as u32).min(self.width - 1);
-        let y = ((theta / PI * self.height as f32) as u32).min(self.height - 1);
-        Vec3::from(self.pixels[(y * self.width + x) as usize]) * self.scale
+        Vec3::from(self.pixels[pixel_of(d, self.width, self.height, self.rotate)]) * self.scale
     }
 
     /// The solid angle of a pixel of row `y`.
@@ -170,6 +166,16 @@ impl EnvMap {
         }
         Vec3::new(sum[0] as f32, sum[1] as f32, sum[2] as f32) * self.scale
     }
+}
+
+/// The index of the pixel of a `width` x `height` lat-long map rotated by `rotate` that holds
+/// direction `d` (normalised).
+pub(crate) fn pixel_of(d: Vec3, width: u32, height: u32, rotate: f32) -> usize {
+    let theta = d.y.clamp(-1.0, 1.0).acos();
+    let phi = (d.z.atan2(d.x) - rotate).rem_euclid(2.0 * PI);
+    let x = ((phi / (2.0 * PI) * width as f32) as u32).min(width - 1);
+    let y = ((theta / PI * height as f32) as u32).min(height - 1);
+    (y * width + x) as usize
 }
 
 /// Checks an OpenEXR file's header before its pixels are decoded: the bytes its layers (and

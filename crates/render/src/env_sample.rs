@@ -80,11 +80,7 @@ impl EnvSampler {
         if self.is_black() {
             return 0.0;
         }
-        let theta = d.y.clamp(-1.0, 1.0).acos();
-        let phi = (d.z.atan2(d.x) - self.rotate).rem_euclid(2.0 * PI);
-        let x = ((phi / (2.0 * PI) * self.width as f32) as usize).min(self.width as usize - 1);
-        let y = ((theta / PI * self.height as f32) as usize).min(self.height as usize - 1);
-        self.lum[y * self.width as usize + x] / self.total
+        self.lum[crate::env::pixel_of(d, self.width, self.height, self.rotate)] / self.total
     }
 }
 

@@ -238,22 +238,6 @@ pub struct FrameOptions {
 /// The tile edge of the frame loop, in pixels.
 pub const TILE: u32 = 32;
 
-/// Pixel indices (row-major) in the order the frame loop takes them: 32x32 tiles in rows,
-/// pixels in rows within a tile (neighbouring jobs see neighbouring pixels).
-fn tile_order(w: u32, h: u32) -> Vec<u32> {
-    let mut order = Vec::with_capacity((w * h) as usize);
-    for ty in 0..h.div_ceil(TILE) {
-        for tx in 0..w.div_ceil(TILE) {
-            for y in ty * TILE..((ty + 1) * TILE).min(h) {
-                for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                    order.push(y * w + x);
-                }
-            }
-        }
-    }
-    order
-}
-
 /// The positions within a 4x4 block in the order a frame against a deadline takes them: each
 /// group of passes halves the spacing of the pixels done (a Bayer order), so that whatever
 /// the deadline leaves is scattered and filled from done neighbours ([`fill_unfinished`]).
@@ -275,28 +259,6 @@ pub(crate) const PASSES: [(u32, u32); 16] = [
     (2, 1),
     (0, 3),
 ];
-
-/// Pixel indices for a frame against a deadline: 16 passes over the image ([`PASSES`]), each
-/// taking one pixel of every 4x4 block, tile by tile (a tile's 64 pixels of a pass are
-/// neighbours enough to trace coherently); tiles walked backward when `backward`.
-fn interleaved_order(w: u32, h: u32, backward: bool) -> Vec<u32> {
-    let mut tiles: Vec<(u32, u32)> =
-        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty))).collect();
-    if backward {
-        tiles.reverse();
-    }
-    let mut order = Vec::with_capacity((w * h) as usize);
-    for &(dx, dy) in &PASSES {
-        for &(tx, ty) in &tiles {
-            for y in (ty * TILE + dy..((ty + 1) * TILE).min(h)).step_by(4) {
-                for x in (tx * TILE + dx..((tx + 1) * TILE).min(w)).step_by(4) {
-                    order.push(y * w + x);
-                }
-            }
-        }
-    }
-    order
-}
 
 /// Fills each pixel of `f` not done from a done pixel nearby (the first of its 4x4 block in
 /// [`PASSES`] order, else of the blocks around it), marking it done and approximate
@@ -384,18 +346,16 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     let mut f = Frame::blank(w, h, aovs);
     let mut finished: Vec<u32> = Vec::new();
     let mut approx: Vec<u32> = Vec::new();
+    // Jobs in the order of rows' groups (`rows`): tiles, and against a deadline interleaved
+    // passes, so that what the deadline leaves is scattered.
+    let groups = match opts.deadline {
+        Some(_) => rows::interleaved_groups(w, h, backward),
+        None => rows::tile_groups(w, h, backward),
+    };
     if aovs {
-        // A pixel a job, the full sample its result.
-        let order = match opts.deadline {
-            Some(_) => interleaved_order(w, h, backward),
-            None => {
-                let mut order = tile_order(w, h);
-                if backward {
-                    order.reverse();
-                }
-                order
-            }
-        };
+        // A pixel a job, the full sample its result: the groups' pixels one by one.
+        let order: Vec<u32> =
+            groups.iter().flat_map(|g| (0..g.len as usize).map(move |k| g.index(k, w) as u32)).collect();
         let job_opts = JobOptions { chunk: 64, deadline: opts.deadline, max_parked, stand_in: opts.stand_in };
         let run = jobs::run(tracer, n, &job_opts, |i, caster| {
             let p = order[i];
@@ -415,11 +375,7 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
             f.albedo[p] = s.albedo.to_array();
         }
     } else {
-        // A group of a row's pixels a job (`rows`), in the same orders.
-        let groups = match opts.deadline {
-            Some(_) => rows::interleaved_groups(w, h, backward),
-            None => rows::tile_groups(w, h, backward),
-        };
+        // A group a job.
         let job_opts = JobOptions { chunk: 8, deadline: opts.deadline, max_parked, stand_in: opts.stand_in };
         let run = jobs::run(tracer, groups.len(), &job_opts, |i, caster| r.group(groups[i], frame, caster));
         f.jobs = run.stats;

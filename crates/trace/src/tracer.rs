@@ -184,6 +184,15 @@ impl<'s> Tracer<'s> {
         Tracer::with_kernels(scene, Kernels { tile_checks: true, ..Kernels::chosen() }).with_pager(pager)
     }
 
+    /// [`Tracer::paged`] when there is a `pager`, else [`Tracer::new`] of `scene` (the
+    /// front ends' choice between a budget and none).
+    pub fn paged_or_new(scene: &'s Scene, pager: Option<&'s Pager>) -> Tracer<'s> {
+        match pager {
+            Some(p) => Tracer::paged(p),
+            None => Tracer::new(scene),
+        }
+    }
+
     /// This tracer reading through `pager` ([`Tracer::paged`]).
     fn with_pager(self, pager: &'s Pager) -> Tracer<'s> {
         Tracer { pager: Some(pager), ..self.stopping_at_every_tile() }
