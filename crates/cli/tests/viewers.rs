@@ -225,23 +225,27 @@ fn the_window_opens_draws_reacts_saves_and_quits() {
 
 /// `megaray serve` on a free port; returns the process and its address.
 fn serve(scene: &Path) -> (Proc, String) {
-    let mut child = Command::new(bin())
-        .args(["serve", scene.to_str().unwrap(), "--bind", "127.0.0.1:0", "--mem", "4M"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut cmd = Command::new(bin());
+    cmd.args(["serve", scene.to_str().unwrap(), "--bind", "127.0.0.1:0", "--mem", "4M"]);
+    spawn_until(cmd, "serve", |line| {
+        line.split("http://").nth(1).map(|rest| rest.split('/').next().unwrap().to_string())
+    })
+}
+
+/// Starts `cmd` and reads its stderr until `found` picks something out of a line (an
+/// address); then keeps draining it, so that the process never blocks on its log.
+fn spawn_until(mut cmd: Command, name: &str, found: impl Fn(&str) -> Option<String>) -> (Proc, String) {
+    let mut child = cmd.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
     let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
     let proc = Proc(child);
-    let addr = loop {
-        let line = lines.next().expect("serve ended before listening").unwrap();
-        if let Some(rest) = line.split("http://").nth(1) {
-            break rest.split('/').next().unwrap().to_string();
+    let value = loop {
+        let line = lines.next().unwrap_or_else(|| panic!("{name} ended before listening")).unwrap();
+        if let Some(v) = found(&line) {
+            break v;
         }
     };
-    // Keep draining the log so the server never blocks on it.
     std::thread::spawn(move || lines.for_each(drop));
-    (proc, addr)
+    (proc, value)
 }
 
 fn http_get(addr: &str, path: &str) -> String {
@@ -279,23 +283,13 @@ struct Browser {
 impl Browser {
     fn launch() -> Browser {
         let profile = tempfile::tempdir().unwrap();
-        let mut child = Command::new("chromium")
-            .args(["--headless", "--no-sandbox", "--disable-gpu", "--remote-debugging-port=0", "--window-size=400,300"])
+        let mut cmd = Command::new("chromium");
+        cmd.args(["--headless", "--no-sandbox", "--disable-gpu", "--remote-debugging-port=0", "--window-size=400,300"])
             .arg(format!("--user-data-dir={}", profile.path().display()))
-            .arg("about:blank")
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
-        let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
-        let proc = Proc(child);
-        let url = loop {
-            let line = lines.next().expect("chromium ended before listening").unwrap();
-            if let Some(u) = line.strip_prefix("DevTools listening on ") {
-                break u.trim().to_string();
-            }
-        };
-        std::thread::spawn(move || lines.for_each(drop));
+            .arg("about:blank");
+        let (proc, url) = spawn_until(cmd, "chromium", |line| {
+            line.strip_prefix("DevTools listening on ").map(|u| u.trim().to_string())
+        });
         let (ws, _) = tungstenite::connect(url).unwrap();
         Browser { ws, next: 1, _proc: proc, _profile: profile }
     }
