@@ -2,6 +2,7 @@
 //!
 //! Nothing here knows about scenes or images. It holds:
 //! - [`Aabb`]: axis-aligned bounding boxes (build and trace both use them);
+//! - [`Affine`]: the 3x4 transforms that place instances;
 //! - [`Camera`]: the pinhole camera and the benchmark framings (rays through pixels);
 //! - [`Ray`] and [`intersect_triangle`]: the scalar, watertight ray-triangle test
 //!   (Woop, Benthin and Wald 2013) that is the reference every faster kernel is tested against;
@@ -20,6 +21,7 @@
 //! ```
 
 mod aabb;
+mod affine;
 mod camera;
 mod progress;
 mod ray;
@@ -27,6 +29,7 @@ mod size;
 pub mod temp;
 
 pub use aabb::Aabb;
+pub use affine::Affine;
 pub use camera::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use glam::Vec3;
 pub use progress::{NoProgress, Progress};

@@ -10,7 +10,10 @@ use megaray_base::Aabb;
 /// The first eight bytes of every scene file.
 pub const MAGIC: [u8; 8] = *b"MRAYSCN\x1a";
 /// The format version this code writes and reads.
-pub const VERSION: u32 = 5;
+pub const VERSION: u32 = 6;
+/// The oldest version this code reads: version 5 is version 6 without instances (its
+/// instance fields were reserved zeros).
+pub const MIN_VERSION: u32 = 5;
 /// Page size: tiles and sections start on multiples of it.
 pub const PAGE: u64 = 4096;
 /// Bytes of the header page (the header struct is followed by zeros up to it).
@@ -46,8 +49,13 @@ pub const ATTR_MATERIAL: u32 = 8;
 /// | 120..128 | `materials_bytes` |
 /// | 128..132 | `material_count` |
 /// | 132..136 | `lod_part_count`: the parts at the end of the directory that are levels of detail |
-/// | 136..144 | `meta_checksum`: XXH3-64 of top-level tree, part, tile and material tables, in that order |
-/// | 144..248 | reserved, zero |
+/// | 136..144 | `meta_checksum`: XXH3-64 of top-level tree, part, tile and material tables and the instance section, in that order |
+/// | 144..152 | `instances_off`: offset of the instance section (`instances.rs`), or 0 |
+/// | 152..160 | `instances_bytes` |
+/// | 160..164 | `object_count` |
+/// | 164..168 | `group_count` (0: no instances; the scene is its parts) |
+/// | 168..172 | `instance_count` |
+/// | 172..248 | reserved, zero |
 /// | 248..256 | `header_checksum`: XXH3-64 of bytes 0..248 |
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -73,7 +81,13 @@ pub struct Header {
     pub material_count: u32,
     pub lod_part_count: u32,
     pub meta_checksum: u64,
-    pub reserved: [u64; 13],
+    pub instances_off: u64,
+    pub instances_bytes: u64,
+    pub object_count: u32,
+    pub group_count: u32,
+    pub instance_count: u32,
+    pub reserved0: u32,
+    pub reserved: [u64; 9],
     pub header_checksum: u64,
 }
 const _: () = assert!(std::mem::size_of::<Header>() == 256);

@@ -31,11 +31,13 @@
 mod backing;
 pub mod error;
 pub mod format;
+pub mod instances;
 pub mod reader;
 pub mod stats;
 pub mod writer;
 
 pub use error::{SceneError, SceneErrorKind};
+pub use instances::{Group, Instance, Instancing, Object, Target};
 pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
 pub use reader::{drop_page_cache, CheckedTiles, Scene, Tile};
 pub use stats::TreeStats;

@@ -69,6 +69,8 @@ pub struct Scene {
     /// lookup, so that a scene that never needs one (a paged tracer keeps its tile) holds
     /// none.
     tile_index: OnceLock<TileIndex>,
+    /// Objects, groups and instances, when the scene has them ([`Scene::instancing`]).
+    instancing: Option<crate::Instancing>,
 }
 
 /// The tiles by position in the file, for [`Scene::tile_of_unit`]: the file cut into
@@ -138,7 +140,7 @@ impl TileIndex {
     #[inline]
     fn slot_of(&self, unit: u64) -> (u32, u32) {
         match self.tiles.get(self.tile_of(unit) as usize) {
-            Some(t) => (t.part, t.first_slot.wrapping_add(4 * (unit.wrapping_sub(t.unit0) / 9) as u32)),
+            Some(t) => (t.part, t.first_slot.wrapping_add(((unit.wrapping_sub(t.unit0) / 9) as u32).wrapping_mul(4))),
             None => (0, 0),
         }
     }
@@ -234,7 +236,7 @@ impl Scene {
                 "not a megaray scene file (bad magic number)",
             ));
         }
-        if header.version != VERSION {
+        if !(MIN_VERSION..=VERSION).contains(&header.version) {
             return Err(SceneError::new(
                 path,
                 SceneErrorKind::Version,
@@ -267,15 +269,18 @@ impl Scene {
             .ok_or_else(|| bad("tile directory lies outside the file"))?;
         let mats = range(header.materials_off, header.materials_bytes, len)
             .ok_or_else(|| bad("material table lies outside the file"))?;
+        let inst = range(header.instances_off, header.instances_bytes, len)
+            .filter(|_| header.instances_off.is_multiple_of(8))
+            .ok_or_else(|| bad("instance section lies outside the file"))?;
         if let Backing::Owned(r) = &backing {
             // The tables stay loaded while the scene is open (the header page is).
-            for t in [&top, &parts, &tiles, &mats] {
+            for t in [&top, &parts, &tiles, &mats, &inst] {
                 r.load(t.start as u64, t.len() as u64).map_err(|e| SceneError::io(path, "read", &e))?;
             }
         }
         let map = backing.bytes();
         let mut meta = xxhash_rust::xxh3::Xxh3::new();
-        for r in [&top, &parts, &tiles, &mats] {
+        for r in [&top, &parts, &tiles, &mats, &inst] {
             meta.update(&map[r.clone()]);
         }
         if !sums_match(meta.digest(), header.meta_checksum) {
@@ -283,6 +288,13 @@ impl Scene {
         }
         let materials =
             decode_materials(&map[mats], header.material_count).ok_or_else(|| bad("material table is malformed"))?;
+        let instancing = match header.group_count {
+            0 => None,
+            _ => Some(
+                crate::Instancing::decode(&map[inst], header.object_count, header.group_count, header.instance_count)
+                    .ok_or_else(|| bad("instance section is malformed"))?,
+            ),
+        };
         let scene = Scene {
             path: path.to_path_buf(),
             tile_state: (0..header.tile_count).map(|_| AtomicU8::new(TILE_UNCHECKED)).collect(),
@@ -292,6 +304,7 @@ impl Scene {
             header,
             backing,
             tile_index: OnceLock::new(),
+            instancing,
         };
         scene.check_tables()?;
         if owned {
@@ -400,6 +413,9 @@ impl Scene {
         }
         if tri_total != h.tri_count {
             return Err(bad(format!("parts hold {tri_total} triangles, header says {}", h.tri_count)));
+        }
+        if let Some(i) = &self.instancing {
+            i.check(full, h.top_node_count, h.material_count).map_err(|e| bad(format!("instances: {e}")))?;
         }
         let mut end = 0;
         for (i, t) in tiles.iter().enumerate() {
@@ -638,7 +654,13 @@ impl Scene {
             (h.parts_off, h.part_count as u64 * 128),
             (h.tiles_off, h.tile_count as u64 * 40),
             (h.materials_off, h.materials_bytes),
+            (h.instances_off, h.instances_bytes),
         ]
+    }
+
+    /// The scene's objects, groups and instances; `None` for a scene that is its parts.
+    pub fn instancing(&self) -> Option<&crate::Instancing> {
+        self.instancing.as_ref()
     }
 
     /// Whether this scene was opened for a pager ([`Scene::open_owned`]): its tiles are

@@ -133,6 +133,8 @@ pub struct SceneWriter {
     top_off: u64,
     parts_off: u64,
     attr_flags: u32,
+    /// Objects, groups and instances ([`SceneWriter::set_instancing`]).
+    instancing: Option<crate::Instancing>,
 }
 
 fn page_up(x: u64) -> u64 {
@@ -194,6 +196,7 @@ impl SceneWriter {
             top_off,
             parts_off,
             attr_flags: 0,
+            instancing: None,
         };
         w.write_at(bytemuck::cast_slice(&w.top_nodes.clone()), top_off)?;
         Ok(w)
@@ -344,6 +347,13 @@ impl SceneWriter {
         Ok(off)
     }
 
+    /// Makes the scene its instances: `inst`'s objects name the parts (in order, covering
+    /// all), their trees lie in the top-level tree given to [`SceneWriter::create`], and
+    /// group 0 is what a renderer shows. Checked in [`SceneWriter::finish`].
+    pub fn set_instancing(&mut self, inst: crate::Instancing) {
+        self.instancing = Some(inst);
+    }
+
     /// Tiles appended so far.
     pub fn tile_count(&self) -> u32 {
         self.tiles.len() as u32
@@ -408,7 +418,18 @@ impl SceneWriter {
         let materials_off = page_up(tiles_off + (tiles.len() * 40) as u64);
         let mat_bytes = encode_materials(materials);
         self.write_at(&mat_bytes, materials_off)?;
-        let file_bytes = page_up(materials_off + mat_bytes.len() as u64);
+        let mut end = materials_off + mat_bytes.len() as u64;
+        let inst = self.instancing.take();
+        let inst_bytes = inst.as_ref().map(|i| i.encode()).unwrap_or_default();
+        let mut instances_off = 0;
+        if let Some(i) = &inst {
+            let bad = |e: String| SceneError::new(&self.path, SceneErrorKind::Corrupt, format!("instances: {e}"));
+            i.check(self.part_count, self.top_nodes.len() as u32, materials.len() as u32).map_err(bad)?;
+            instances_off = page_up(end);
+            self.write_at(&inst_bytes, instances_off)?;
+            end = instances_off + inst_bytes.len() as u64;
+        }
+        let file_bytes = page_up(end);
         let parts_off = self.parts_off;
         self.write_at(bytemuck::cast_slice(&parts), parts_off)?;
 
@@ -417,6 +438,7 @@ impl SceneWriter {
         meta.extend_from_slice(bytemuck::cast_slice(&parts));
         meta.extend_from_slice(bytemuck::cast_slice(&tiles));
         meta.extend_from_slice(&mat_bytes);
+        meta.extend_from_slice(&inst_bytes);
         let mut h = Header {
             magic: MAGIC,
             version: VERSION,
@@ -439,7 +461,13 @@ impl SceneWriter {
             material_count: materials.len() as u32,
             lod_part_count: self.lods.len() as u32,
             meta_checksum: xxhash_rust::xxh3::xxh3_64(&meta),
-            reserved: [0; 13],
+            instances_off,
+            instances_bytes: inst_bytes.len() as u64,
+            object_count: inst.as_ref().map_or(0, |i| i.objects.len() as u32),
+            group_count: inst.as_ref().map_or(0, |i| i.groups.len() as u32),
+            instance_count: inst.as_ref().map_or(0, |i| i.instances.len() as u32),
+            reserved0: 0,
+            reserved: [0; 9],
             header_checksum: 0,
         };
         h.header_checksum = xxhash_rust::xxh3::xxh3_64(&bytemuck::bytes_of(&h)[..248]);
