@@ -32,6 +32,7 @@
 pub mod attrs;
 pub mod bvh;
 pub mod lod;
+pub mod objects;
 pub mod sink;
 pub mod split;
 pub mod stream;
@@ -48,6 +49,7 @@ use megaray_scene::{BlobRef, PartBlob, SceneWriter};
 
 pub use crate::bvh::Quality;
 use crate::bvh::{build_bvh, build_bvh_of, BvhConfig, Kid};
+pub use crate::objects::{InstancePlan, ObjectInput, ObjectSource, SceneInput};
 use crate::stream::{StreamFile, StreamReader, StreamTri};
 
 /// The most triangles a leaf holds: two blocks of four, when the SAH finds that cheaper than
@@ -122,6 +124,11 @@ pub struct BuildSummary {
     pub triangles: u64,
     pub degenerate_dropped: u64,
     pub parts: u32,
+    /// Objects built (1 for a scene without instances), instances placed (0 without), and
+    /// the triangles the scene shows, every instance counted.
+    pub objects: u32,
+    pub instances: u64,
+    pub instanced_triangles: u128,
     /// Levels of detail made (parts of their own in the file), and their bytes.
     pub lod_parts: u32,
     pub lod_bytes: u64,
@@ -184,6 +191,19 @@ pub fn build_scene(
     if inputs.is_empty() {
         return Err(BuildError::Invalid("no input files".into()));
     }
+    let scene = SceneInput::plain(ObjectSource::Files(inputs.to_vec()));
+    build_objects(scene, out, opts, progress)
+}
+
+/// Builds a scene of objects (and, if given, the groups and instances that place them) into
+/// the scene file `out`: each object's triangles are streamed, split and built into parts
+/// as [`build_scene`] does for its inputs, and given a tree of its own over its parts.
+pub fn build_objects(
+    mut scene: SceneInput<'_>,
+    out: &Path,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<BuildSummary, BuildError> {
     if opts.build_mem < 2 * FIXED_RESERVE && opts.max_part_tris.is_none() {
         return Err(BuildError::Invalid(format!(
             "--build-mem {} is too small: at least {} is needed",
@@ -206,55 +226,98 @@ pub fn build_scene(
         .build()
         .map_err(|e| BuildError::Invalid(format!("cannot start threads: {e}")))?;
 
-    // 1. Import.
+    // 1. Import, one positions stream per object.
     let mut sink = sink::BuildSink::new(tmp.path(), opts)?;
+    for m in std::mem::take(&mut scene.materials) {
+        megaray_import::TriangleSink::material(&mut sink, m);
+    }
+    let names: Vec<String> = scene.objects.iter().map(|o| o.name.clone()).collect();
     let mut input_bytes = 0;
-    for input in inputs {
-        let iopts = megaray_import::ImportOptions {
-            mem_limit: opts.import_mem.unwrap_or(opts.build_mem / 4),
-            temp_dir: tmp.path().to_path_buf(),
-        };
-        sink.set_input(input);
-        let dropped_before = sink.dropped();
-        let s = match megaray_import::import_file(input, &iopts, &mut sink, progress) {
-            Ok(s) => s,
-            // A failure of our own (disk full, cancelled) outranks the reader's view of it.
-            Err(e) => return Err(sink.take_error().unwrap_or(e.into())),
-        };
-        let dropped = sink.dropped() - dropped_before;
-        if dropped > 0 {
-            progress.note(&format!("{}: skipped {dropped} degenerate (zero-area) triangles", input.display()));
+    let mut inputs = 0;
+    let mut roots = Vec::with_capacity(scene.objects.len());
+    let first_input = scene.objects.iter().find_map(|o| match &o.source {
+        ObjectSource::Files(f) => f.first().cloned(),
+        ObjectSource::Fn(_) => None,
+    });
+    for obj in std::mem::take(&mut scene.objects) {
+        match obj.source {
+            ObjectSource::Files(files) => {
+                for input in &files {
+                    input_bytes += import_one(input, &mut sink, &tmp, opts, progress)?;
+                    inputs += 1;
+                }
+            }
+            ObjectSource::Fn(feed) => {
+                sink.set_input(Path::new(&obj.name));
+                if let Err(e) = feed(&mut sink) {
+                    return Err(sink.take_error().unwrap_or(e.into()));
+                }
+            }
         }
-        input_bytes += s.bytes;
+        roots.push(sink.end_object()?);
         check_cancel(opts)?;
     }
-    let (root, mut attrs, materials, dropped) = sink.finish()?;
-    if root.count == 0 {
-        return Err(BuildError::NoTriangles(inputs[0].clone()));
+    let (mut attrs, materials, dropped) = sink.finish()?;
+    let triangles: u64 = roots.iter().map(|r| r.count).sum();
+    if triangles == 0 {
+        return Err(BuildError::NoTriangles(first_input.unwrap_or_else(|| out.to_path_buf())));
     }
-    let triangles = root.count;
-    let bounds = root.bounds;
     let import_s = t0.elapsed().as_secs_f64();
     attrs.finish_writing()?;
 
-    // 2. Split.
+    // 2. Split each object's stream into parts (objects left empty are dropped).
     let t1 = Instant::now();
     let limit = opts.part_limit();
     let io = split::IoCount::default();
-    progress.stage("split", if triangles > limit { triangles * 48 } else { 0 });
-    let mut parts = pool.install(|| split::split(root, limit, opts, &io, progress))?;
+    let to_split: u64 = roots.iter().filter(|r| r.count > limit).map(|r| r.count * 48).sum();
+    progress.stage("split", to_split);
+    let mut parts = Vec::new();
+    let mut objects = Vec::new();
+    let mut kept = Vec::with_capacity(roots.len());
+    for (k, root) in roots.into_iter().enumerate() {
+        if root.count == 0 {
+            let _ = std::fs::remove_file(&root.path);
+            kept.push(None);
+            continue;
+        }
+        kept.push(Some(objects.len() as u32));
+        let (tris, bounds) = (root.count, root.bounds);
+        let mut ps = pool.install(|| split::split(root, limit, opts, &io, progress))?;
+        // Parts in a spatially coherent order (the order the splits produced them).
+        ps.sort_by_key(|p| p.path.clone());
+        objects.push((k, parts.len() as u32, ps.len() as u32, bounds, tris));
+        parts.extend(ps);
+    }
     progress.finish();
-    // Parts in a spatially coherent order (the order the splits produced them).
-    parts.sort_by_key(|p| p.path.clone());
     let split_s = t1.elapsed().as_secs_f64();
     let split_levels = parts.iter().map(|p| p.level).max().unwrap_or(0);
 
-    // 3. Top level over the parts' boxes, then the parts.
+    // 3. Each object's tree over its parts' boxes (one array, objects in order), then the parts.
     let t2 = Instant::now();
-    let boxes: Vec<Aabb> = parts.iter().map(|p| p.bounds).collect();
-    let (top_nodes, top_depth) = top_level(&boxes);
+    let mut top_nodes = Vec::new();
+    let mut top_depth = 0;
+    let mut trees = Vec::with_capacity(objects.len());
+    for &(_, first, count, _, _) in &objects {
+        let boxes: Vec<Aabb> = parts[first as usize..(first + count) as usize].iter().map(|p| p.bounds).collect();
+        let (nodes, depth) = top_level(&boxes);
+        trees.push((top_nodes.len() as u32, nodes.len() as u32));
+        top_nodes.extend(objects::placed(nodes, top_nodes.len() as u32, first));
+        top_depth = top_depth.max(depth);
+    }
+    let instancing = match scene.instancing.take() {
+        None => None,
+        Some(plan) => Some(objects::instancing(plan, &objects, &trees, &kept, &scene_names(&objects, &names))?),
+    };
+    let bounds = match &instancing {
+        Some(i) => i.group_bounds()[0],
+        None => objects.iter().fold(Aabb::EMPTY, |b, o| b.union(&o.3)),
+    };
     let lod_capacity = opts.lod.map_or(0, |l| l.max_levels as u32) * parts.len() as u32;
-    let writer = SceneWriter::create(out, top_nodes, top_depth, parts.len() as u32, lod_capacity, opts.tile_target)?;
+    let mut writer =
+        SceneWriter::create(out, top_nodes, top_depth, parts.len() as u32, lod_capacity, opts.tile_target)?;
+    if let Some(i) = instancing.clone() {
+        writer.set_instancing(i);
+    }
     let lod_count = std::sync::atomic::AtomicU32::new(0);
     let lod_bytes = std::sync::atomic::AtomicU64::new(0);
     let writer = Mutex::new(writer);
@@ -292,10 +355,13 @@ pub fn build_scene(
     let parts_s = t2.elapsed().as_secs_f64();
     drop(tmp);
     Ok(BuildSummary {
-        inputs: inputs.len(),
+        inputs,
         triangles,
         degenerate_dropped: dropped,
         parts: parts.len() as u32,
+        objects: objects.len() as u32,
+        instances: instancing.as_ref().map_or(0, |i| i.instances.len() as u64),
+        instanced_triangles: instancing.as_ref().map_or(triangles as u128, |i| i.instanced_triangles()),
         lod_parts: lod_count.load(Ordering::Relaxed),
         lod_bytes: lod_bytes.load(Ordering::Relaxed),
         tiles,
@@ -311,6 +377,37 @@ pub fn build_scene(
         parts_s,
         total_s: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Each object's name, in the order objects were kept.
+fn scene_names(objects: &[(usize, u32, u32, Aabb, u64)], names: &[String]) -> Vec<String> {
+    objects.iter().map(|o| names.get(o.0).cloned().unwrap_or_default()).collect()
+}
+
+/// Imports one model file into the build's sink; returns the bytes read.
+fn import_one(
+    input: &Path,
+    sink: &mut sink::BuildSink<'_>,
+    tmp: &tempfile::TempDir,
+    opts: &BuildOptions,
+    progress: &dyn Progress,
+) -> Result<u64, BuildError> {
+    let iopts = megaray_import::ImportOptions {
+        mem_limit: opts.import_mem.unwrap_or(opts.build_mem / 4),
+        temp_dir: tmp.path().to_path_buf(),
+    };
+    sink.set_input(input);
+    let dropped_before = sink.dropped();
+    let s = match megaray_import::import_file(input, &iopts, sink, progress) {
+        Ok(s) => s,
+        // A failure of our own (disk full, cancelled) outranks the reader's view of it.
+        Err(e) => return Err(sink.take_error().unwrap_or(e.into())),
+    };
+    let dropped = sink.dropped() - dropped_before;
+    if dropped > 0 {
+        progress.note(&format!("{}: skipped {dropped} degenerate (zero-area) triangles", input.display()));
+    }
+    Ok(s.bytes)
 }
 
 /// The top-level tree over part boxes, in file layout; returns nodes and depth.

@@ -11,7 +11,13 @@ use crate::stream::{StreamFile, StreamTri, StreamWriter};
 use crate::{BuildError, BuildOptions};
 
 pub struct BuildSink<'a> {
+    /// The current object's positions stream (`s{objects}` in `dir`).
     stream: StreamWriter,
+    dir: std::path::PathBuf,
+    /// Objects finished so far ([`BuildSink::end_object`]).
+    objects: usize,
+    /// Triangle ids of earlier objects' streams: ids run on across objects, as attributes do.
+    id_base: u64,
     attrs: AttrStreams,
     materials: Vec<MaterialDesc>,
     dropped: u64,
@@ -25,7 +31,10 @@ pub struct BuildSink<'a> {
 impl<'a> BuildSink<'a> {
     pub fn new(dir: &Path, opts: &'a BuildOptions) -> Result<BuildSink<'a>, BuildError> {
         Ok(BuildSink {
-            stream: StreamWriter::create(&dir.join("s"), crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0)?,
+            stream: Self::object_stream(dir, 0)?,
+            dir: dir.to_path_buf(),
+            objects: 0,
+            id_base: 0,
             attrs: AttrStreams::new(dir),
             materials: Vec::new(),
             dropped: 0,
@@ -51,13 +60,31 @@ impl<'a> BuildSink<'a> {
         self.error.take()
     }
 
-    /// Closes the streams: the positions stream, the attribute streams, the materials, and
-    /// the number of degenerate triangles dropped.
-    pub fn finish(self) -> Result<(StreamFile, AttrStreams, Vec<MaterialDesc>, u64), BuildError> {
+    fn object_stream(dir: &Path, k: usize) -> Result<StreamWriter, BuildError> {
+        StreamWriter::create(&dir.join(format!("s{k}")), crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0)
+    }
+
+    /// Closes the current object's positions stream and starts the next object's.
+    pub fn end_object(&mut self) -> Result<StreamFile, BuildError> {
+        if let Some(e) = self.error.take() {
+            return Err(e);
+        }
+        self.objects += 1;
+        let next = Self::object_stream(&self.dir, self.objects)?;
+        let done = std::mem::replace(&mut self.stream, next).finish()?;
+        self.id_base += done.count;
+        Ok(done)
+    }
+
+    /// Closes the streams (the positions stream of an object not ended is dropped): the
+    /// attribute streams, the materials, and the number of degenerate triangles dropped.
+    pub fn finish(self) -> Result<(AttrStreams, Vec<MaterialDesc>, u64), BuildError> {
         if let Some(e) = self.error {
             return Err(e);
         }
-        Ok((self.stream.finish()?, self.attrs, self.materials, self.dropped))
+        let rest = self.stream.finish()?;
+        let _ = std::fs::remove_file(&rest.path);
+        Ok((self.attrs, self.materials, self.dropped))
     }
 }
 
@@ -79,7 +106,7 @@ impl TriangleSink for BuildSink<'_> {
             self.dropped += 1;
             return Ok(());
         }
-        let id = self.stream.count();
+        let id = self.id_base + self.stream.count();
         let r = self.stream.push(&StreamTri { v: p, reserved: 0, id }).and_then(|_| self.attrs.push(attr));
         if let Err(e) = r {
             let msg = e.to_string();

@@ -104,7 +104,8 @@ impl TextureCache {
 pub fn material_at(scene: &Scene, hit: &Hit, textures: &TextureCache) -> Material {
     let mut m = Material::default();
     let w = [1.0 - hit.u - hit.v, hit.u, hit.v];
-    if let Some(d) = scene.material(hit.part, hit.prim) {
+    let over = hit.placed.and_then(|p| p.material()).and_then(|m| scene.materials().get(m as usize));
+    if let Some(d) = over.or_else(|| scene.material(hit.part, hit.prim)) {
         m.has_material = true;
         if let Some(c) = d.diffuse {
             m.albedo = Vec3::from(c);

@@ -73,7 +73,11 @@ impl SurfaceHit {
         let mut ns = ng;
         if let Some(n) = scene.normals(hit.part, hit.prim) {
             let w = 1.0 - hit.u - hit.v;
-            let n = (Vec3::from(n[0]) * w + Vec3::from(n[1]) * hit.u + Vec3::from(n[2]) * hit.v).normalize_or_zero();
+            let mut n = Vec3::from(n[0]) * w + Vec3::from(n[1]) * hit.u + Vec3::from(n[2]) * hit.v;
+            if let Some(p) = &hit.placed {
+                n = p.normal_to_world(n);
+            }
+            let n = n.normalize_or_zero();
             if n != Vec3::ZERO {
                 ns = if n.dot(ng) < 0.0 { -n } else { n };
             }

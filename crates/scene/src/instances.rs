@@ -223,7 +223,10 @@ impl Instancing {
                     Target::Group(h) => h as usize > g && (h as usize) < self.groups.len(),
                 };
                 if !ok {
-                    return Err(format!("instance {k} of group {g}: bad target {:?} (groups name later groups only)", inst.target));
+                    return Err(format!(
+                        "instance {k} of group {g}: bad target {:?} (groups name later groups only)",
+                        inst.target
+                    ));
                 }
             }
         }
@@ -314,7 +317,10 @@ mod tests {
         };
         Instancing {
             objects: vec![obj("tree", 0, 0), obj("rock", 1, 1)],
-            groups: vec![Group { name: "scene".into(), first: 0, count: 2 }, Group { name: "grove".into(), first: 2, count: 3 }],
+            groups: vec![
+                Group { name: "scene".into(), first: 0, count: 2 },
+                Group { name: "grove".into(), first: 2, count: 3 },
+            ],
             instances: vec![
                 inst(Target::Group(1), 0.0),
                 inst(Target::Group(1), 10.0),

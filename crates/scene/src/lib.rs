@@ -37,8 +37,8 @@ pub mod stats;
 pub mod writer;
 
 pub use error::{SceneError, SceneErrorKind};
-pub use instances::{Group, Instance, Instancing, Object, Target};
 pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
+pub use instances::{Group, Instance, Instancing, Object, Target};
 pub use reader::{drop_page_cache, CheckedTiles, Scene, Tile};
 pub use stats::TreeStats;
 pub use writer::{BlobChild, BlobRef, MaterialDesc, PartBlob, SceneWriter, TileBlob};

@@ -97,3 +97,94 @@ pub fn point_triangle_distance(p: [f32; 3], [a, b, c]: [[f32; 3]; 3]) -> f32 {
     };
     (p - q).length()
 }
+
+/// A triangle's corners.
+pub type Tri = [[f32; 3]; 3];
+
+/// Builds a scene of `objects` (triangles in memory) placed by `plan` into `dir/name.mray`.
+pub fn build_instanced(
+    dir: &Path,
+    name: &str,
+    objects: &[Vec<Tri>],
+    plan: &megaray_build::objects::InstancePlan,
+    opts: BuildOptions,
+) -> (PathBuf, BuildSummary) {
+    use megaray_build::{ObjectInput, SceneInput};
+    let out = dir.join(format!("{name}.mray"));
+    let objects = objects
+        .iter()
+        .enumerate()
+        .map(|(k, tris)| ObjectInput { name: format!("object {k}"), source: feed(tris.clone()) })
+        .collect();
+    let input = SceneInput { objects, instancing: Some(plan.clone()), materials: Vec::new() };
+    let s = megaray_build::build_objects(input, &out, &opts, &NoProgress).unwrap();
+    (out, s)
+}
+
+/// Builds `tris` as a scene without instances into `dir/name.mray`.
+pub fn build_tris(dir: &Path, name: &str, tris: Vec<Tri>, opts: BuildOptions) -> (PathBuf, BuildSummary) {
+    let out = dir.join(format!("{name}.mray"));
+    let s =
+        megaray_build::build_objects(megaray_build::SceneInput::plain(feed(tris)), &out, &opts, &NoProgress).unwrap();
+    (out, s)
+}
+
+fn feed<'a>(tris: Vec<Tri>) -> megaray_build::ObjectSource<'a> {
+    megaray_build::ObjectSource::Fn(Box::new(move |sink| {
+        let attr = megaray_import::TriAttr { material: megaray_import::NO_MATERIAL, ..Default::default() };
+        for t in tris {
+            sink.triangle(t, &attr)?;
+        }
+        Ok(())
+    }))
+}
+
+/// Every triangle `plan` shows, in world space: each object's triangles moved along every
+/// path of instances from group 0 down to it.
+pub fn expand(objects: &[Vec<Tri>], plan: &megaray_build::objects::InstancePlan) -> Vec<Tri> {
+    use megaray_base::{Affine, Vec3};
+    use megaray_scene::Target;
+    fn walk(
+        objects: &[Vec<Tri>],
+        plan: &megaray_build::objects::InstancePlan,
+        g: usize,
+        to_world: Affine,
+        out: &mut Vec<Tri>,
+    ) {
+        let gr = &plan.groups[g];
+        for inst in &plan.instances[gr.first as usize..(gr.first + gr.count) as usize] {
+            let m = to_world.then_after(&inst.xform);
+            match inst.target {
+                Target::Group(h) => walk(objects, plan, h as usize, m, out),
+                Target::Object(o) => {
+                    out.extend(objects[o as usize].iter().map(|t| t.map(|c| m.point(Vec3::from(c)).into())))
+                }
+            }
+        }
+    }
+    let mut out = Vec::new();
+    walk(objects, plan, 0, Affine::IDENTITY, &mut out);
+    out
+}
+
+/// A closed sphere of `2 n^2` triangles around `c`, radius `r`, slightly bumpy (so that
+/// its triangles differ).
+pub fn sphere(c: [f32; 3], r: f32, n: usize) -> Vec<Tri> {
+    let p = |i: usize, j: usize| -> [f32; 3] {
+        let th = std::f32::consts::PI * i as f32 / n as f32;
+        let ph = 2.0 * std::f32::consts::PI * j as f32 / n as f32;
+        let rr = r * (1.0 + 0.05 * ((3 * i + 5 * j) % 7) as f32 / 7.0);
+        let rr = if i == 0 || i == n { r } else { rr };
+        [c[0] + rr * th.sin() * ph.cos(), c[1] + rr * th.cos(), c[2] + rr * th.sin() * ph.sin()]
+    };
+    let mut out = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, cc, d) = (p(i, j), p(i + 1, j), p(i + 1, j + 1), p(i, j + 1));
+            out.push([a, b, cc]);
+            out.push([a, cc, d]);
+        }
+    }
+    out.retain(|t| !megaray_base::tri_is_degenerate(t));
+    out
+}

@@ -20,7 +20,7 @@ impl<'s> Tracer<'s> {
     /// for missing tiles (use [`Tracer::try_intersect`] not to).
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        if self.pager.is_none() {
+        if self.pager.is_none() && self.layer.is_none() {
             return self.hit_of(self.unpaged::<false>(ray));
         }
         self.blocking(ray, false)
@@ -30,7 +30,7 @@ impl<'s> Tracer<'s> {
     /// waits for missing tiles (use [`Tracer::try_occluded`] not to).
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
-        if self.pager.is_none() {
+        if self.pager.is_none() && self.layer.is_none() {
             return self.unpaged::<true>(ray).is_some();
         }
         self.blocking(ray, true).is_some()
@@ -99,8 +99,9 @@ impl<'s> Tracer<'s> {
     pub fn intersect16(&self, rays: &Rays16, hits: &mut [Option<Hit>]) {
         assert!(rays.len <= packet::WIDTH && rays.len <= hits.len(), "one hit slot per ray, at most 16");
         let hits = &mut hits[..rays.len];
-        if self.pager.is_some() {
-            // Packets do not suspend: a paged tracer traces them ray by ray.
+        if self.pager.is_some() || self.layer.is_some() {
+            // Packets do not suspend, nor enter instances: a paged tracer, or one of a scene
+            // with instances, traces them ray by ray.
             for (i, h) in hits.iter_mut().enumerate() {
                 *h = self.intersect(&rays.ray(i));
             }
@@ -142,6 +143,9 @@ impl<'s> Tracer<'s> {
         pad: usize,
         lod: Option<&LodRay>,
     ) -> Traced {
+        if let Some(l) = &self.layer {
+            return l.traverse(ray, any, from, lod);
+        }
         #[cfg(target_arch = "x86_64")]
         match self.isa {
             // `isa` is one that the CPU reported (`Isa::detect`, `Isa::available`). The
@@ -362,7 +366,14 @@ impl<'s> Tracer<'s> {
                             spill.extend_from_slice(&w.fixed[..w.sp]);
                             spill.extend(w.next);
                             let hit = self.hit_after(w.best, prior);
-                            return Err(Box::new(Pending { stack: spill, best: w.best, hit, any: ANY, tile }));
+                            return Err(Box::new(Pending {
+                                stack: spill,
+                                best: w.best,
+                                hit,
+                                any: ANY,
+                                tile,
+                                inside: None,
+                            }));
                         }
                         // A corrupt tile: what needed it is skipped.
                         Err(_) => w.next = None,

@@ -253,7 +253,7 @@ impl<'t, 's> Replay<'t, 's> {
 }
 
 /// A stand-in hit for any-hit answers (only `is_some` matters).
-const HIT_ANY: Hit = Hit { t: 0.0, u: 0.0, v: 0.0, part: 0, prim: 0, tri: [[0.0; 3]; 3] };
+const HIT_ANY: Hit = Hit { t: 0.0, u: 0.0, v: 0.0, part: 0, prim: 0, tri: [[0.0; 3]; 3], placed: None };
 
 impl RayCaster for Replay<'_, '_> {
     fn scene(&self) -> &Scene {

@@ -42,6 +42,8 @@
 mod asm;
 mod boxes;
 mod driver;
+mod inst;
+mod inst_bvh;
 pub mod isa;
 pub mod jobs;
 mod lod;
@@ -74,8 +76,40 @@ pub struct Hit {
     pub part: u32,
     /// The triangle's slot within its part (indexes the part's attributes).
     pub prim: u32,
-    /// The triangle's corners.
+    /// The triangle's corners (in world space: an instance's are moved there).
     pub tri: [[f32; 3]; 3],
+    /// Where the hit's object was placed, for a hit through instances (`None` otherwise):
+    /// what turns its object-space attributes into the world's.
+    pub placed: Option<Placement>,
+}
+
+/// How an instanced hit's object was placed: the transform of its normals and the material
+/// the instance gives it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Placement {
+    /// Object-space normals to world space (rows; the inverse transpose of the placement,
+    /// not normalising).
+    pub normal: [[f32; 3]; 3],
+    /// A material index (into the scene's material table) overriding the triangle's, or
+    /// `u32::MAX`.
+    pub material: u32,
+}
+
+impl Placement {
+    /// An object-space normal in world space (not normalised).
+    pub fn normal_to_world(&self, n: Vec3) -> Vec3 {
+        let m = &self.normal;
+        Vec3::new(
+            m[0][0] * n.x + m[0][1] * n.y + m[0][2] * n.z,
+            m[1][0] * n.x + m[1][1] * n.y + m[1][2] * n.z,
+            m[2][0] * n.x + m[2][1] * n.y + m[2][2] * n.z,
+        )
+    }
+
+    /// The material override, if any.
+    pub fn material(&self) -> Option<u32> {
+        (self.material != u32::MAX).then_some(self.material)
+    }
 }
 
 impl Hit {
@@ -170,9 +204,19 @@ pub struct Pending {
     hit: Option<Hit>,
     any: bool,
     tile: u32,
+    /// For a ray of the instance layer: the instances down to the object it stopped in
+    /// (their indices), and its state in that object.
+    inside: Option<Box<(Vec<u32>, Pending)>>,
 }
 
 impl Pending {
+    /// A ray of the instance layer that stopped in the object at the end of `path`
+    /// (`inner`), having found `hit` so far.
+    pub(crate) fn inside(hit: Option<Hit>, any: bool, path: Vec<u32>, inner: Pending) -> Pending {
+        let tile = inner.tile;
+        Pending { stack: Vec::new(), best: None, hit, any, tile, inside: Some(Box::new((path, inner))) }
+    }
+
     /// The tile the ray waits for.
     pub fn tile(&self) -> u32 {
         self.tile

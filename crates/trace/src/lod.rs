@@ -162,6 +162,12 @@ impl<'s> Tracer<'s> {
         // above); a tracer that crosses tiles inline traces full detail.
         if has_lod && t.checked.is_none() {
             t.lod = lod_levels(t.scene).into();
+            let lod = t.lod.clone();
+            if let Some(l) = t.layer.as_mut() {
+                for o in &mut l.objects {
+                    o.lod = lod.clone();
+                }
+            }
         }
         t.set_lod_error(pixels);
         t
@@ -208,7 +214,7 @@ impl<'s> Tracer<'s> {
             return None;
         }
         let Some(lod) = self.lod_ray(c, false) else {
-            if self.pager.is_none() {
+            if self.pager.is_none() && self.layer.is_none() {
                 // Full detail, unpaged: the fastest way in.
                 return self.hit_of(if any { self.unpaged::<true>(ray) } else { self.unpaged::<false>(ray) });
             }

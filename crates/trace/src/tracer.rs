@@ -111,10 +111,13 @@ pub struct Tracer<'s> {
     pub(crate) choice: Kernels,
     /// The level-of-detail error allowed, in footprints, as `f32` bits
     /// ([`Tracer::with_lod_error`]); 0: full detail.
-    pub(crate) lod_px: std::sync::atomic::AtomicU32,
+    pub(crate) lod_px: std::sync::Arc<std::sync::atomic::AtomicU32>,
     /// The levels of detail of each full-detail part, where this tracer chooses them
     /// ([`Tracer::with_lod_error`]); empty: full detail always.
     pub(crate) lod: std::sync::Arc<[crate::lod::LodLevels]>,
+    /// The instance layer, for a scene with instances (`inst.rs`): the queries go through
+    /// it, and it traces each object with a tracer of its own (which has none).
+    pub(crate) layer: Option<Box<crate::inst::Layer<'s>>>,
 }
 
 impl<'s> Tracer<'s> {
@@ -147,8 +150,9 @@ impl<'s> Tracer<'s> {
             asm: Tracer::asm_kernel(&k, all_checked),
             asm_stack: k.asm_stack.clamp(1, STACK - W),
             choice: k,
-            lod_px: std::sync::atomic::AtomicU32::new(0),
+            lod_px: std::sync::Arc::new(std::sync::atomic::AtomicU32::new(0)),
             lod: std::sync::Arc::new([]),
+            layer: None,
             root: match scene.parts() {
                 // The part's root, as the top-level tree links to it (in range: checked by
                 // `Scene::open`).
@@ -159,6 +163,50 @@ impl<'s> Tracer<'s> {
                 _ => Entry { r: ChildRef::inner(top0).0, arr: TOP, t: f32::NEG_INFINITY },
             },
         }
+        .with_layer()
+    }
+
+    /// This tracer with the instance layer of its scene, if the scene has instances.
+    fn with_layer(mut self) -> Tracer<'s> {
+        if let Some(i) = self.scene.instancing() {
+            let layer = crate::inst::Layer::new(&self, self.scene, i);
+            self.bounds = layer.bounds();
+            self.layer = Some(Box::new(layer));
+        }
+        self
+    }
+
+    /// A tracer of the object whose tree starts at `root` (its box `bounds`), with this
+    /// tracer's kernels, pager and levels of detail, and no instance layer.
+    pub(crate) fn object_tracer(&self, root: Entry, bounds: megaray_base::Aabb) -> Tracer<'s> {
+        Tracer {
+            scene: self.scene,
+            pager: self.pager,
+            tiles: self.tiles,
+            nodes: self.nodes,
+            isa: self.isa,
+            root,
+            bounds,
+            checked: self.checked,
+            all_checked: self.all_checked,
+            octant_kernels: self.octant_kernels,
+            kernels: self.kernels,
+            new_ray: self.new_ray,
+            asm: self.asm,
+            asm_stack: self.asm_stack,
+            choice: self.choice,
+            lod_px: self.lod_px.clone(),
+            lod: self.lod.clone(),
+            layer: None,
+        }
+    }
+
+    /// This tracer with `f` applied to it and to its objects' tracers.
+    fn map_objects(mut self, f: impl Fn(Tracer<'s>) -> Tracer<'s>) -> Tracer<'s> {
+        if let Some(l) = self.layer.as_mut() {
+            l.objects = std::mem::take(&mut l.objects).into_iter().map(&f).collect();
+        }
+        f(self)
     }
 
     /// The kernels this tracer was asked to run ([`Tracer::with_kernels`]).
@@ -195,13 +243,13 @@ impl<'s> Tracer<'s> {
 
     /// This tracer reading through `pager` ([`Tracer::paged`]).
     fn with_pager(self, pager: &'s Pager) -> Tracer<'s> {
-        Tracer { pager: Some(pager), ..self.stopping_at_every_tile() }
+        self.map_objects(|t| Tracer { pager: Some(pager), ..t.stopping_at_every_tile() })
     }
 
     /// This tracer with no tile counted as checked: every crossing into a tile returns to
     /// the driver ([`Tracer::enter`]).
     pub(crate) fn stopping_at_every_tile(self) -> Tracer<'s> {
-        Tracer { checked: CheckedTiles::NONE, ..self }
+        self.map_objects(|t| Tracer { checked: CheckedTiles::NONE, ..t })
     }
 
     /// The pager, for a paged tracer.
@@ -320,7 +368,7 @@ impl<'s> Tracer<'s> {
         let f = f?;
         let (part, slot0) = self.slots(f.arr, f.unit);
         let tri = corners(self.block_at(f.unit), f.lane as usize);
-        Some(Hit { t: f.t, u: f.u, v: f.v, part, prim: slot0 + f.lane, tri })
+        Some(Hit { t: f.t, u: f.u, v: f.v, part, prim: slot0 + f.lane, tri, placed: None })
     }
 
     /// The part of tile `arr` and the slot of lane 0 of its block at `unit` (lane `l` of the

@@ -1,0 +1,235 @@
+//! The trees over a group's instances: binary BVHs of instance boxes, built in core by
+//! binned SAH each time instances move (the seed rebuilds its top level every frame), and
+//! walked by a scalar loop (a group's tree is small and shallow beside an object's).
+
+use megaray_base::{Aabb, Ray};
+
+/// A node: its box, and either its children (the left one follows it, the right at
+/// `index`) or a leaf of `count` instances from `index` of the tree's order. 32 bytes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct InstNode {
+    pub(crate) bounds: Aabb,
+    /// Instances in a leaf; 0 for an inner node.
+    pub(crate) count: u32,
+    pub(crate) index: u32,
+}
+const _: () = assert!(std::mem::size_of::<InstNode>() == 32);
+
+/// Most instances in a leaf.
+const LEAF: usize = 2;
+/// Bins of the SAH sweep.
+const BINS: usize = 16;
+/// Subtrees over more instances than this are built on two threads.
+const PARALLEL: usize = 8192;
+
+/// A tree over boxes (`order` holds the indices of `boxes` in leaf order).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct InstTree {
+    pub(crate) nodes: Vec<InstNode>,
+    pub(crate) order: Vec<u32>,
+}
+
+impl InstTree {
+    /// The tree over `boxes` (empty ones are left out: they hold nothing to hit).
+    pub(crate) fn build(boxes: &[Aabb]) -> InstTree {
+        let mut order: Vec<u32> = (0..boxes.len() as u32).filter(|&i| !boxes[i as usize].is_empty()).collect();
+        if order.is_empty() {
+            return InstTree::default();
+        }
+        let cents: Vec<[f32; 3]> = boxes.iter().map(|b| b.center().into()).collect();
+        // A binary tree with leaves of at most two holds at most 2n - 1 nodes; each subtree
+        // is given exactly that many slots, so that the two sides fill disjoint ranges (the
+        // unused slots are never reached).
+        let mut nodes = vec![InstNode { bounds: Aabb::EMPTY, count: 0, index: 0 }; 2 * order.len() - 1];
+        build_into(boxes, &cents, &mut order, 0, &mut nodes, 0);
+        InstTree { nodes, order }
+    }
+
+    /// Calls `visit(instance, t_near)` for each instance whose leaf box `ray` enters within
+    /// `[t_min, t_max)`, nearest boxes first, `t_max` read again after each visit (`visit`
+    /// lowers it as hits are found); stops when `visit` returns false.
+    #[inline]
+    pub(crate) fn walk(&self, ray: &Ray, t_max: &dyn Fn() -> f32, mut visit: impl FnMut(u32) -> bool) {
+        if self.nodes.is_empty() {
+            return;
+        }
+        let inv = ray.dir.recip();
+        let t0 = megaray_base::t_start(ray.t_min);
+        let enter = |b: &Aabb, t1: f32| -> Option<f32> {
+            let (mut near, mut far) = (t0, t1);
+            for k in 0..3 {
+                let a = (b.min[k] - ray.org[k]) * inv[k];
+                let c = (b.max[k] - ray.org[k]) * inv[k];
+                // `max`/`min` skip a NaN (0 * inf: the origin in the slab's plane, the ray
+                // along it): that axis then cuts nothing, which is never too strict.
+                near = near.max(a.min(c));
+                far = far.min(a.max(c) * (1.0 + 4.0 * f32::EPSILON));
+            }
+            (near <= far).then_some(near)
+        };
+        let mut stack: Vec<(u32, f32)> = Vec::with_capacity(64);
+        if let Some(t) = enter(&self.nodes[0].bounds, t_max()) {
+            stack.push((0, t));
+        }
+        while let Some((i, t)) = stack.pop() {
+            if t > t_max() {
+                continue;
+            }
+            let n = &self.nodes[i as usize];
+            if n.count > 0 {
+                for &inst in &self.order[n.index as usize..(n.index + n.count) as usize] {
+                    if !visit(inst) {
+                        return;
+                    }
+                }
+                continue;
+            }
+            let (l, r) = (i + 1, n.index);
+            let tm = t_max();
+            match (enter(&self.nodes[l as usize].bounds, tm), enter(&self.nodes[r as usize].bounds, tm)) {
+                (Some(a), Some(b)) => {
+                    // The nearer popped first.
+                    if a <= b {
+                        stack.extend([(r, b), (l, a)]);
+                    } else {
+                        stack.extend([(l, a), (r, b)]);
+                    }
+                }
+                (Some(a), None) => stack.push((l, a)),
+                (None, Some(b)) => stack.push((r, b)),
+                (None, None) => {}
+            }
+        }
+    }
+}
+
+/// Builds the subtree over `refs` (whose first element is `refs_at` of the whole order)
+/// into `nodes[0]` and the slots after it.
+fn build_into(boxes: &[Aabb], cents: &[[f32; 3]], refs: &mut [u32], refs_at: u32, nodes: &mut [InstNode], at: u32) {
+    let mut bounds = Aabb::EMPTY;
+    let mut cb = Aabb::EMPTY;
+    for &r in refs.iter() {
+        bounds.grow(&boxes[r as usize]);
+        cb.grow_point(cents[r as usize]);
+    }
+    if refs.len() <= LEAF {
+        nodes[0] = InstNode { bounds, count: refs.len() as u32, index: refs_at };
+        return;
+    }
+    let mid = split(boxes, cents, refs, &cb);
+    let parallel = refs.len() > PARALLEL;
+    let (lr, rr) = refs.split_at_mut(mid);
+    let left_slots = 2 * lr.len() - 1;
+    nodes[0] = InstNode { bounds, count: 0, index: at + 1 + left_slots as u32 };
+    let (_, rest) = nodes.split_at_mut(1);
+    let (ln, rn) = rest.split_at_mut(left_slots);
+    let mut left = move || build_into(boxes, cents, lr, refs_at, ln, at + 1);
+    let mut right = move || build_into(boxes, cents, rr, refs_at + mid as u32, rn, at + 1 + left_slots as u32);
+    if parallel {
+        rayon::join(left, right);
+    } else {
+        left();
+        right();
+    }
+}
+
+/// Partitions `refs` by the binned SAH on the centroids' widest axis; returns the size of
+/// the left side (the middle when the centroids coincide or no split is cheaper).
+fn split(boxes: &[Aabb], cents: &[[f32; 3]], refs: &mut [u32], cb: &Aabb) -> usize {
+    let axis = cb.longest_axis();
+    let (lo, ext) = (cb.min[axis], cb.max[axis] - cb.min[axis]);
+    if ext.is_nan() || ext <= 0.0 {
+        return refs.len() / 2;
+    }
+    let scale = BINS as f32 / ext;
+    let bin = |r: u32| (((cents[r as usize][axis] - lo) * scale) as usize).min(BINS - 1);
+    let mut bb = [Aabb::EMPTY; BINS];
+    let mut bc = [0u32; BINS];
+    for &r in refs.iter() {
+        let b = bin(r);
+        bb[b].grow(&boxes[r as usize]);
+        bc[b] += 1;
+    }
+    // Costs of splitting after bin k: right sides by a sweep from the end.
+    let mut right = [0.0f32; BINS];
+    let (mut acc, mut n) = (Aabb::EMPTY, 0u32);
+    for k in (1..BINS).rev() {
+        acc.grow(&bb[k]);
+        n += bc[k];
+        right[k] = if n > 0 { acc.half_area() * n as f32 } else { 0.0 };
+    }
+    let (mut acc, mut n) = (Aabb::EMPTY, 0u32);
+    let (mut best, mut best_k) = (f32::INFINITY, 0);
+    for k in 0..BINS - 1 {
+        acc.grow(&bb[k]);
+        n += bc[k];
+        let cost = if n > 0 { acc.half_area() * n as f32 } else { 0.0 } + right[k + 1];
+        if n > 0 && (n as usize) < refs.len() && cost < best {
+            (best, best_k) = (cost, k);
+        }
+    }
+    if best == f32::INFINITY {
+        return refs.len() / 2;
+    }
+    // Partition in place: bins up to `best_k` to the left.
+    let (mut i, mut j) = (0, refs.len());
+    while i < j {
+        if bin(refs[i]) <= best_k {
+            i += 1;
+        } else {
+            j -= 1;
+            refs.swap(i, j);
+        }
+    }
+    i
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use megaray_base::Vec3;
+
+    /// Every box the ray enters is visited, whatever the tree's shape.
+    #[test]
+    fn walks_visit_every_box_the_ray_enters() {
+        let mut s = 7u32;
+        let mut rnd = || {
+            s = megaray_base::hash32(s);
+            megaray_base::u01(s)
+        };
+        for n in [1usize, 2, 3, 17, 1000, 20_000] {
+            let boxes: Vec<Aabb> = (0..n)
+                .map(|_| {
+                    let c = Vec3::new(rnd(), rnd(), rnd()) * 100.0;
+                    let h = Vec3::splat(rnd() * 3.0 + 0.01);
+                    Aabb { min: (c - h).into(), max: (c + h).into() }
+                })
+                .collect();
+            let t = InstTree::build(&boxes);
+            for _ in 0..50 {
+                let o = Vec3::new(rnd(), rnd(), rnd()) * 100.0;
+                let d = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5);
+                let ray = Ray::new(o, d);
+                let mut seen = vec![false; n];
+                t.walk(&ray, &|| f32::INFINITY, |i| {
+                    seen[i as usize] = true;
+                    true
+                });
+                let rb = |b: &Aabb| {
+                    let (mut near, mut far) = (0.0f32, f32::INFINITY);
+                    for k in 0..3 {
+                        let (a, c) = ((b.min[k] - o[k]) / d[k], (b.max[k] - o[k]) / d[k]);
+                        near = near.max(a.min(c));
+                        far = far.min(a.max(c));
+                    }
+                    near <= far
+                };
+                for (i, b) in boxes.iter().enumerate() {
+                    if rb(b) {
+                        assert!(seen[i], "n {n}: box {i} entered but not visited");
+                    }
+                }
+            }
+        }
+    }
+}
