@@ -49,7 +49,7 @@ use megaray_scene::{BlobRef, PartBlob, SceneWriter};
 
 pub use crate::bvh::Quality;
 use crate::bvh::{build_bvh, build_bvh_of, BvhConfig, Kid};
-pub use crate::objects::{InstancePlan, ObjectInput, ObjectSource, SceneInput};
+pub use crate::objects::{pbrt_input, InstancePlan, ObjectInput, ObjectSource, SceneInput};
 use crate::stream::{StreamFile, StreamReader, StreamTri};
 
 /// The most triangles a leaf holds: two blocks of four, when the SAH finds that cheaper than
@@ -237,7 +237,7 @@ pub fn build_objects(
     let mut roots = Vec::with_capacity(scene.objects.len());
     let first_input = scene.objects.iter().find_map(|o| match &o.source {
         ObjectSource::Files(f) => f.first().cloned(),
-        ObjectSource::Fn(_) => None,
+        ObjectSource::Fn(_) | ObjectSource::Pbrt(_) => None,
     });
     for obj in std::mem::take(&mut scene.objects) {
         match obj.source {
@@ -252,6 +252,18 @@ pub fn build_objects(
                 if let Err(e) = feed(&mut sink) {
                     return Err(sink.take_error().unwrap_or(e.into()));
                 }
+            }
+            ObjectSource::Pbrt(desc) => {
+                sink.set_input(Path::new(&obj.name));
+                let iopts = megaray_import::ImportOptions {
+                    mem_limit: opts.import_mem.unwrap_or(opts.build_mem / 4),
+                    temp_dir: tmp.path().to_path_buf(),
+                };
+                match megaray_import::pbrt::feed_object(&desc, &iopts, &mut sink, progress) {
+                    Ok(b) => input_bytes += b,
+                    Err(e) => return Err(sink.take_error().unwrap_or(e.into())),
+                }
+                inputs += 1;
             }
         }
         roots.push(sink.end_object()?);
@@ -317,6 +329,9 @@ pub fn build_objects(
         SceneWriter::create(out, top_nodes, top_depth, parts.len() as u32, lod_capacity, opts.tile_target)?;
     if let Some(i) = instancing.clone() {
         writer.set_instancing(i);
+    }
+    if !scene.settings.is_empty() {
+        writer.set_settings(std::mem::take(&mut scene.settings));
     }
     let lod_count = std::sync::atomic::AtomicU32::new(0);
     let lod_bytes = std::sync::atomic::AtomicU64::new(0);

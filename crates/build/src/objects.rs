@@ -20,6 +20,8 @@ pub struct SceneInput<'a> {
     /// Materials declared before any object's, so that instances' material overrides can
     /// name them by their index here.
     pub materials: Vec<Material>,
+    /// Stored as the scene file's settings (JSON: camera, lights), if not empty.
+    pub settings: String,
 }
 
 impl<'a> SceneInput<'a> {
@@ -29,6 +31,7 @@ impl<'a> SceneInput<'a> {
             objects: vec![ObjectInput { name: String::new(), source }],
             instancing: None,
             materials: Vec::new(),
+            settings: String::new(),
         }
     }
 }
@@ -46,6 +49,73 @@ pub enum ObjectSource<'a> {
     /// A function that hands them to the build (a scene file's own meshes, generated ones).
     #[allow(clippy::type_complexity)]
     Fn(Box<dyn FnOnce(&mut dyn TriangleSink) -> Result<(), ImportError> + 'a>),
+    /// The shapes of an object of a pbrt scene ([`megaray_import::pbrt`]).
+    Pbrt(megaray_import::pbrt::ObjectDesc),
+}
+
+/// A pbrt scene as a build's input: each object's shapes an object, group 0 the world,
+/// each named object a group (its shapes' object and the objects placed in it), numbered
+/// from the last defined, so that groups name only later groups; and the scene's camera
+/// and lights as the scene file's settings.
+pub fn pbrt_input<'a>(p: &megaray_import::pbrt::PbrtScene) -> SceneInput<'a> {
+    use megaray_base::Affine;
+    let n = p.objects.len();
+    // pbrt object k's group: 0 for the world, else counted down from the last defined.
+    let group_of = |k: usize| if k == 0 { 0 } else { (n - k) as u32 };
+    let mut objects = Vec::new();
+    let mut mesh_of = vec![None; n];
+    for (k, o) in p.objects.iter().enumerate() {
+        if !o.shapes.is_empty() {
+            mesh_of[k] = Some(objects.len() as u32);
+            objects.push(ObjectInput { name: o.name.clone(), source: ObjectSource::Pbrt(o.clone()) });
+        }
+    }
+    let mut by_group: Vec<usize> = (0..n).collect();
+    by_group.sort_by_key(|&k| group_of(k));
+    let mut plan = InstancePlan::default();
+    for &k in &by_group {
+        let first = plan.instances.len() as u32;
+        let o = &p.objects[k];
+        if let Some(m) = mesh_of[k] {
+            plan.instances.push(Instance {
+                name: o.name.clone(),
+                xform: Affine::IDENTITY,
+                target: Target::Object(m),
+                material: None,
+            });
+        }
+        for &(t, xf) in &o.instances {
+            let name = p.objects[t as usize].name.clone();
+            plan.instances.push(Instance {
+                name,
+                xform: xf,
+                target: Target::Group(group_of(t as usize)),
+                material: None,
+            });
+        }
+        plan.groups.push(Group { name: o.name.clone(), first, count: plan.instances.len() as u32 - first });
+    }
+    SceneInput { objects, instancing: Some(plan), materials: p.materials.clone(), settings: settings_json(p) }
+}
+
+/// A pbrt scene's camera and lights as the scene file's settings (JSON).
+fn settings_json(p: &megaray_import::pbrt::PbrtScene) -> String {
+    let v = |v: megaray_base::Vec3| format!("[{},{},{}]", v.x, v.y, v.z);
+    let mut parts = Vec::new();
+    if let Some(c) = &p.camera {
+        parts.push(format!(r#""camera":{{"eye":{},"at":{},"up":{},"fov":{}}}"#, v(c.eye), v(c.at), v(c.up), c.fov));
+    }
+    if let Some(r) = p.resolution {
+        parts.push(format!(r#""resolution":[{},{}]"#, r.0, r.1));
+    }
+    if let Some((path, scale)) = &p.environment {
+        let path = path.to_string_lossy().replace('\\', "\\\\").replace('"', "\\\"");
+        parts.push(format!(r#""environment":{{"file":"{path}","scale":{scale}}}"#));
+    }
+    if let Some((dir, l)) = &p.sun {
+        parts.push(format!(r#""sun":{{"dir":{},"radiance":[{},{},{}]}}"#, v(*dir), l[0], l[1], l[2]));
+    }
+    format!("{{{}}}", parts.join(","))
 }
 
 /// Groups and instances as a scene file describes them: targets index the input's objects.

@@ -203,7 +203,12 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
     let cancel = opts.cancel.clone();
     let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed));
     let generated = GeneratedInputs::of(&a.inputs, &a.out, bars)?;
-    let s = build_scene(&generated.inputs, &a.out, &opts, bars).map_err(|e| {
+    let pbrt = crate::open::pbrt_scene(&a.inputs, bars)?;
+    let built = match pbrt {
+        Some(p) => megaray_build::build_objects(megaray_build::pbrt_input(&p), &a.out, &opts, bars),
+        None => build_scene(&generated.inputs, &a.out, &opts, bars),
+    };
+    let s = built.map_err(|e| {
         // Faults in temporary files name those; say which build they stopped.
         let named = e.to_string().contains(&*a.out.to_string_lossy());
         let e = anyhow::Error::from(e);
@@ -542,7 +547,8 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             );
         }
     }
-    let cam = Camera::look_at(eye, at, a.up, a.fov, w, h);
+    let own = if a.eye.is_none() && a.at.is_none() { crate::open::scene_camera(&scene, w, h) } else { None };
+    let cam = own.unwrap_or_else(|| Camera::look_at(eye, at, a.up, a.fov, w, h));
     let mut settings = RenderSettings::new(cam);
     settings.light = a.light;
     settings.spp = a.spp;
@@ -675,143 +681,6 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         if a.paging.stats {
             crate::paging::print_stats(pager.as_ref(), &acc.jobs());
         }
-    }
-    Ok(())
-}
-
-// ---------------------------------------------------------------------------------------
-#[derive(Args)]
-pub struct InfoArgs {
-    /// The scene file.
-    scene: PathBuf,
-    /// Print one JSON object instead of text.
-    #[arg(long)]
-    json: bool,
-    /// Also check every tile's checksum (reads the whole file).
-    #[arg(long)]
-    verify: bool,
-    /// Also walk every part's tree: node and leaf counts, child-slot fill and the SAH cost
-    /// as Embree's `verbose=2` statistics measure it (reads every node of the file).
-    #[arg(long)]
-    tree: bool,
-}
-
-pub fn info(a: InfoArgs) -> Result<()> {
-    let scene = Scene::open(&a.scene)?;
-    if a.verify {
-        scene.verify_all()?;
-    }
-    let h = *scene.header();
-    // The full-detail parts (the levels of detail after them are reported on their own).
-    let full = scene.full_part_count();
-    let parts = &scene.parts()[..full as usize];
-    let tiles: Vec<_> = scene.tiles().iter().filter(|t| t.part < full).copied().collect();
-    let lod_bytes = scene.lod_bytes();
-    let lod_errors: Vec<f32> = scene.parts()[full as usize..].iter().map(|p| p.lod_error).collect();
-    let lod_levels = parts.iter().enumerate().map(|(i, _)| scene.lod_chain(i as u32).count() - 1).max().unwrap_or(0);
-    let n = h.tri_count.max(1) as f64;
-    let node_bytes: u64 = tiles.iter().map(|t| t.node_count as u64 * megaray_scene::format::NODE_BYTES as u64).sum();
-    let tri_bytes: u64 = tiles.iter().map(|t| t.blocks as u64 * 144).sum();
-    let slots: u64 = parts.iter().map(|p| p.slot_count).sum();
-    let fill = h.tri_count as f64 / slots.max(1) as f64;
-    let tile_total: u64 = parts.iter().map(|p| p.tile_bytes).sum();
-    let padding = tile_total - node_bytes - tri_bytes;
-    let attr_bytes: u64 = parts
-        .iter()
-        .map(|p| {
-            let t = p.slot_count;
-            [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)]
-                .iter()
-                .filter(|(o, _)| *o != 0)
-                .map(|(_, s)| (t * s).div_ceil(4096) * 4096)
-                .sum::<u64>()
-        })
-        .sum();
-    let meta = h.file_bytes - tile_total - attr_bytes - lod_bytes;
-    let depths: Vec<u32> = parts.iter().map(|p| p.depth).collect();
-    let (dmin, dmax) = (depths.iter().min().copied().unwrap_or(0), depths.iter().max().copied().unwrap_or(0));
-    let tile_sizes: Vec<u32> = tiles.iter().map(|t| t.bytes).collect();
-    let tmean = tile_sizes.iter().map(|&b| b as f64).sum::<f64>() / tile_sizes.len().max(1) as f64;
-    let tree = a.tree.then(|| scene.tree_stats());
-    if a.json {
-        let tree = tree.map(|t| {
-            serde_json::json!({
-                "inner_nodes": t.inner_nodes, "child_slots": t.child_slots, "leaves": t.leaves,
-                "blocks": t.blocks, "sah": t.sah(), "sah_nodes": t.sah_nodes, "sah_leaves": t.sah_leaves,
-            })
-        });
-        println!(
-            "{}",
-            serde_json::json!({
-                "file": a.scene, "format_version": h.version, "file_bytes": h.file_bytes,
-                "triangles": h.tri_count, "degenerate_dropped": h.degenerate_dropped,
-                "bounds": {"min": h.bounds.min, "max": h.bounds.max},
-                "parts": full, "tiles": tiles.len(), "tile_target": h.tile_target,
-                "lod": {"parts": h.lod_part_count, "levels_max": lod_levels, "bytes": lod_bytes,
-                        "fraction_of_file": lod_bytes as f64 / h.file_bytes as f64,
-                        "error_min": lod_errors.iter().copied().fold(f32::INFINITY, f32::min),
-                        "error_max": lod_errors.iter().copied().fold(0.0, f32::max)},
-                "tile_bytes_mean": tmean, "materials": h.material_count, "block_fill": fill,
-                "top_depth": h.top_depth, "top_nodes": h.top_node_count,
-                "part_depth_min": dmin, "part_depth_max": dmax,
-                "attributes": {"normals": h.attr_flags & 1 != 0, "uvs": h.attr_flags & 2 != 0,
-                               "colors": h.attr_flags & 4 != 0, "materials": h.attr_flags & 8 != 0},
-                "bytes_per_triangle": {
-                    "total": h.file_bytes as f64 / n, "nodes": node_bytes as f64 / n,
-                    "triangle_blocks": tri_bytes as f64 / n, "tile_padding": padding as f64 / n,
-                    "attributes": attr_bytes as f64 / n, "tables": meta as f64 / n,
-                    "levels_of_detail": lod_bytes as f64 / n,
-                },
-                "verified": a.verify,
-                "tree": tree,
-            })
-        );
-        return Ok(());
-    }
-    println!("{} (scene format version {})", a.scene.display(), h.version);
-    println!("  triangles        {} ({} degenerate dropped at build)", h.tri_count, h.degenerate_dropped);
-    println!("  bounds           {:?} .. {:?}", h.bounds.min, h.bounds.max);
-    println!("  parts            {} (top-level tree: {} nodes, depth {})", full, h.top_node_count, h.top_depth);
-    println!("  part tree depth  {dmin} .. {dmax}");
-    println!(
-        "  tiles            {} (target {}, mean payload {})",
-        tiles.len(),
-        format_size(h.tile_target as u64),
-        format_size(tmean as u64)
-    );
-    println!("  materials        {}", h.material_count);
-    println!("  file             {} = {:.1} bytes/triangle:", format_size(h.file_bytes), h.file_bytes as f64 / n);
-    println!("    nodes          {:.1}", node_bytes as f64 / n);
-    println!("    triangles      {:.1} (blocks of 4, {:.0}% of lanes used)", tri_bytes as f64 / n, 100.0 * fill);
-    println!("    tile padding   {:.1}", padding as f64 / n);
-    println!("    attributes     {:.1}", attr_bytes as f64 / n);
-    println!("    tables, header {:.1}", meta as f64 / n);
-    if h.lod_part_count > 0 {
-        println!(
-            "    levels of detail {:.1} ({}, {:.1}% of the file: {} parts, up to {} levels a part, errors {:.3e} .. {:.3e})",
-            lod_bytes as f64 / n,
-            format_size(lod_bytes),
-            100.0 * lod_bytes as f64 / h.file_bytes as f64,
-            h.lod_part_count,
-            lod_levels,
-            lod_errors.iter().copied().fold(f32::INFINITY, f32::min),
-            lod_errors.iter().copied().fold(0.0, f32::max)
-        );
-    } else {
-        println!("    levels of detail none (built with --no-lod)");
-    }
-    if let Some(t) = tree {
-        println!(
-            "  tree             {} inner nodes ({:.0}% of child slots used), {} leaves, {} blocks",
-            t.inner_nodes,
-            100.0 * t.child_slots as f64 / (8 * t.inner_nodes.max(1)) as f64,
-            t.leaves,
-            t.blocks
-        );
-        println!("    SAH cost       {:.3} = nodes {:.3} + leaves {:.3}", t.sah(), t.sah_nodes, t.sah_leaves);
-    }
-    if a.verify {
-        println!("  every tile's checksum verified");
     }
     Ok(())
 }

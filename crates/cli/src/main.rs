@@ -5,6 +5,7 @@
 mod bench;
 mod cmd;
 mod fault;
+mod info;
 mod open;
 mod paging;
 mod pick;
@@ -75,7 +76,7 @@ enum Command {
     #[command(verbatim_doc_comment)]
     Render(Box<cmd::RenderArgs>),
     /// Describe a scene file: triangles, bounds, parts, tree depths, tiles, bytes per triangle.
-    Info(cmd::InfoArgs),
+    Info(info::InfoArgs),
     /// Generate a power plant, build it out of core, render it: the whole pipeline.
     Demo(cmd::DemoArgs),
     /// Measure ray and build throughput, in lines comparable with the Embree peer harness
@@ -153,7 +154,7 @@ fn main() {
         Command::Gen(a) => cmd::gen(a, &bars),
         Command::Build(a) => cmd::build(a, &bars),
         Command::Render(a) => cmd::render(*a, &bars),
-        Command::Info(a) => cmd::info(a),
+        Command::Info(a) => info::info(a),
         Command::Demo(a) => cmd::demo(a, &bars),
         Command::Bench(a) => bench::bench(a, &bars),
         Command::View(a) => view::view(a, &bars),

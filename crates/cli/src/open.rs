@@ -94,3 +94,40 @@ fn sanitize(name: &str) -> String {
         s
     }
 }
+
+/// The pbrt-v4 scene among `inputs` (which must then be the only input), parsed, its
+/// skipped statements noted one line per kind.
+pub(crate) fn pbrt_scene(inputs: &[PathBuf], bars: &dyn Progress) -> Result<Option<megaray_import::pbrt::PbrtScene>> {
+    let is_pbrt = |p: &PathBuf| {
+        let n = p.to_string_lossy();
+        n.ends_with(".pbrt") || n.ends_with(".pbrt.gz")
+    };
+    let Some(p) = inputs.iter().find(|p| is_pbrt(p)) else { return Ok(None) };
+    if inputs.len() > 1 {
+        anyhow::bail!("{}: a pbrt scene is built on its own (give it as the only input)", p.display());
+    }
+    let scene = megaray_import::pbrt::read_scene(p)?;
+    for (what, n) in &scene.skipped {
+        bars.note(&format!("{}: skipped {n} x {what} (not drawn by megaray)", p.display()));
+    }
+    Ok(Some(scene))
+}
+
+/// The camera the scene file's source gave (a pbrt scene's), at `w` x `h`; its field of
+/// view (pbrt's, of the shorter side) made vertical.
+pub(crate) fn scene_camera(scene: &megaray_scene::Scene, w: u32, h: u32) -> Option<megaray_base::Camera> {
+    let v: serde_json::Value = serde_json::from_str(scene.settings()?).ok()?;
+    let c = v.get("camera")?;
+    let vec = |k: &str| -> Option<megaray_base::Vec3> {
+        let a = c.get(k)?.as_array()?;
+        Some(megaray_base::Vec3::new(
+            a.first()?.as_f64()? as f32,
+            a.get(1)?.as_f64()? as f32,
+            a.get(2)?.as_f64()? as f32,
+        ))
+    };
+    let fov = c.get("fov")?.as_f64()? as f32;
+    let vfov =
+        if w < h { 2.0 * ((fov.to_radians() / 2.0).tan() * h as f32 / w as f32).atan().to_degrees() } else { fov };
+    Some(megaray_base::Camera::look_at(vec("eye")?, vec("at")?, vec("up")?, vfov, w, h))
+}

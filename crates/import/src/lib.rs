@@ -44,6 +44,7 @@ use std::path::{Path, PathBuf};
 
 mod gltf;
 mod obj;
+pub mod pbrt;
 mod ply;
 mod reader;
 mod stl;

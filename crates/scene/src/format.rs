@@ -55,7 +55,10 @@ pub const ATTR_MATERIAL: u32 = 8;
 /// | 160..164 | `object_count` |
 /// | 164..168 | `group_count` (0: no instances; the scene is its parts) |
 /// | 168..172 | `instance_count` |
-/// | 172..248 | reserved, zero |
+/// | 172..176 | reserved, zero |
+/// | 176..184 | `settings_off`: offset of the settings (UTF-8 JSON: camera, lights), or 0 |
+/// | 184..192 | `settings_bytes` |
+/// | 192..248 | reserved, zero |
 /// | 248..256 | `header_checksum`: XXH3-64 of bytes 0..248 |
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -87,7 +90,9 @@ pub struct Header {
     pub group_count: u32,
     pub instance_count: u32,
     pub reserved0: u32,
-    pub reserved: [u64; 9],
+    pub settings_off: u64,
+    pub settings_bytes: u64,
+    pub reserved: [u64; 7],
     pub header_checksum: u64,
 }
 const _: () = assert!(std::mem::size_of::<Header>() == 256);

@@ -71,6 +71,8 @@ pub struct Scene {
     tile_index: OnceLock<TileIndex>,
     /// Objects, groups and instances, when the scene has them ([`Scene::instancing`]).
     instancing: Option<crate::Instancing>,
+    /// The scene's settings (JSON), empty when it has none.
+    settings: String,
 }
 
 /// The tiles by position in the file, for [`Scene::tile_of_unit`]: the file cut into
@@ -272,15 +274,17 @@ impl Scene {
         let inst = range(header.instances_off, header.instances_bytes, len)
             .filter(|_| header.instances_off.is_multiple_of(8))
             .ok_or_else(|| bad("instance section lies outside the file"))?;
+        let settings = range(header.settings_off, header.settings_bytes, len)
+            .ok_or_else(|| bad("settings lie outside the file"))?;
         if let Backing::Owned(r) = &backing {
             // The tables stay loaded while the scene is open (the header page is).
-            for t in [&top, &parts, &tiles, &mats, &inst] {
+            for t in [&top, &parts, &tiles, &mats, &inst, &settings] {
                 r.load(t.start as u64, t.len() as u64).map_err(|e| SceneError::io(path, "read", &e))?;
             }
         }
         let map = backing.bytes();
         let mut meta = xxhash_rust::xxh3::Xxh3::new();
-        for r in [&top, &parts, &tiles, &mats, &inst] {
+        for r in [&top, &parts, &tiles, &mats, &inst, &settings] {
             meta.update(&map[r.clone()]);
         }
         if !sums_match(meta.digest(), header.meta_checksum) {
@@ -295,6 +299,7 @@ impl Scene {
                     .ok_or_else(|| bad("instance section is malformed"))?,
             ),
         };
+        let settings_text = String::from_utf8_lossy(&map[settings]).into_owned();
         let scene = Scene {
             path: path.to_path_buf(),
             tile_state: (0..header.tile_count).map(|_| AtomicU8::new(TILE_UNCHECKED)).collect(),
@@ -305,6 +310,7 @@ impl Scene {
             backing,
             tile_index: OnceLock::new(),
             instancing,
+            settings: settings_text,
         };
         scene.check_tables()?;
         if owned {
@@ -655,7 +661,14 @@ impl Scene {
             (h.tiles_off, h.tile_count as u64 * 40),
             (h.materials_off, h.materials_bytes),
             (h.instances_off, h.instances_bytes),
+            (h.settings_off, h.settings_bytes),
         ]
+    }
+
+    /// The settings the scene's source gave (a JSON document: `camera` with `eye`, `at`,
+    /// `up`, `fov`; `environment`, `sun`), or `None`.
+    pub fn settings(&self) -> Option<&str> {
+        (!self.settings.is_empty()).then_some(self.settings.as_str())
     }
 
     /// The scene's objects, groups and instances; `None` for a scene that is its parts.

@@ -135,6 +135,8 @@ pub struct SceneWriter {
     attr_flags: u32,
     /// Objects, groups and instances ([`SceneWriter::set_instancing`]).
     instancing: Option<crate::Instancing>,
+    /// The scene's own settings ([`SceneWriter::set_settings`]).
+    settings: String,
 }
 
 fn page_up(x: u64) -> u64 {
@@ -197,6 +199,7 @@ impl SceneWriter {
             parts_off,
             attr_flags: 0,
             instancing: None,
+            settings: String::new(),
         };
         w.write_at(bytemuck::cast_slice(&w.top_nodes.clone()), top_off)?;
         Ok(w)
@@ -354,6 +357,12 @@ impl SceneWriter {
         self.instancing = Some(inst);
     }
 
+    /// Stores `json` (a UTF-8 JSON document: the scene's camera and lights as its source
+    /// gave them) after the tables.
+    pub fn set_settings(&mut self, json: String) {
+        self.settings = json;
+    }
+
     /// Tiles appended so far.
     pub fn tile_count(&self) -> u32 {
         self.tiles.len() as u32
@@ -429,6 +438,12 @@ impl SceneWriter {
             self.write_at(&inst_bytes, instances_off)?;
             end = instances_off + inst_bytes.len() as u64;
         }
+        let settings = std::mem::take(&mut self.settings).into_bytes();
+        let settings_off = if settings.is_empty() { 0 } else { end };
+        if !settings.is_empty() {
+            self.write_at(&settings, settings_off)?;
+            end += settings.len() as u64;
+        }
         let file_bytes = page_up(end);
         let parts_off = self.parts_off;
         self.write_at(bytemuck::cast_slice(&parts), parts_off)?;
@@ -439,6 +454,7 @@ impl SceneWriter {
         meta.extend_from_slice(bytemuck::cast_slice(&tiles));
         meta.extend_from_slice(&mat_bytes);
         meta.extend_from_slice(&inst_bytes);
+        meta.extend_from_slice(&settings);
         let mut h = Header {
             magic: MAGIC,
             version: VERSION,
@@ -467,7 +483,9 @@ impl SceneWriter {
             group_count: inst.as_ref().map_or(0, |i| i.groups.len() as u32),
             instance_count: inst.as_ref().map_or(0, |i| i.instances.len() as u32),
             reserved0: 0,
-            reserved: [0; 9],
+            settings_off,
+            settings_bytes: settings.len() as u64,
+            reserved: [0; 7],
             header_checksum: 0,
         };
         h.header_checksum = xxhash_rust::xxh3::xxh3_64(&bytemuck::bytes_of(&h)[..248]);

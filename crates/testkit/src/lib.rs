@@ -116,7 +116,7 @@ pub fn build_instanced(
         .enumerate()
         .map(|(k, tris)| ObjectInput { name: format!("object {k}"), source: feed(tris.clone()) })
         .collect();
-    let input = SceneInput { objects, instancing: Some(plan.clone()), materials: Vec::new() };
+    let input = SceneInput { objects, instancing: Some(plan.clone()), materials: Vec::new(), settings: String::new() };
     let s = megaray_build::build_objects(input, &out, &opts, &NoProgress).unwrap();
     (out, s)
 }
