@@ -81,6 +81,20 @@ pub fn gen(a: GenArgs, bars: &dyn Progress) -> Result<()> {
         );
         return Ok(());
     }
+    if a.spec.starts_with("forest:") {
+        let mut spec: megaray_gen::forest::ForestSpec = a.spec.parse()?;
+        spec.seed = a.seed as u32;
+        let f = megaray_gen::forest::write_forest(&spec, &a.out, bars)?;
+        eprintln!(
+            "wrote {} and {} tree files: {:.3e} triangles shown ({} unique, {} levels of groves)",
+            a.out.display(),
+            f.files.len() - 1,
+            f.shown,
+            f.unique,
+            f.levels
+        );
+        return Ok(());
+    }
     let spec: GenSpec = a.spec.parse()?;
     let spec = spec.with_seed(a.seed);
     let t = Instant::now();

@@ -34,6 +34,7 @@
 #![warn(missing_docs)]
 
 mod error;
+pub mod forest;
 mod peer;
 mod plant;
 mod ply;

@@ -122,11 +122,19 @@ fn malformed_scenes_give_one_line_with_file_line_and_column() {
         ("unbalanced AttributeEnd", "WorldBegin\nAttributeEnd", "line 2:1"),
         ("missing Include", "Include \"nowhere.pbrt\"", "line 1:1"),
         ("unknown statement", "WorldBegin\n\n   Frobnicate 3", "line 3:4"),
-        ("index out of range", "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 7]", "line 1:1"),
+        (
+            "index out of range",
+            "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 7]",
+            "line 1:1",
+        ),
         ("unterminated list", "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0", "line 1:22"),
         ("unknown object", "ObjectInstance \"ghost\"", "line 1:1"),
         ("bad declaration", "Shape \"trianglemesh\" \"P\" [0 0 0]", "line 1:22"),
-        ("huge count", "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [4000000000 0 1]", "out of range"),
+        (
+            "huge count",
+            "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [4000000000 0 1]",
+            "out of range",
+        ),
     ];
     for (what, text, at) in cases {
         let p = write(dir.path(), "bad.pbrt", text);
