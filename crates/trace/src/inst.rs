@@ -42,6 +42,9 @@ pub(crate) struct Layer<'s> {
     groups: Vec<InstTree>,
     /// Each group's instances (`first .. first + count` of `inst`).
     members: Vec<(u32, u32)>,
+    /// Arrays kept from one rebuild to the next.
+    boxes: Vec<Aabb>,
+    refs: Vec<crate::inst_bvh::Ref>,
 }
 
 impl<'s> Layer<'s> {
@@ -78,7 +81,8 @@ impl<'s> Layer<'s> {
             })
             .collect();
         let members = i.groups.iter().map(|g| (g.first, g.count)).collect();
-        let mut l = Layer { objects, inst, groups: Vec::new(), members };
+        let groups = vec![InstTree::default(); i.groups.len()];
+        let mut l = Layer { objects, inst, groups, members, boxes: Vec::new(), refs: Vec::new() };
         l.rebuild();
         l
     }
@@ -88,23 +92,28 @@ impl<'s> Layer<'s> {
     pub(crate) fn rebuild(&mut self) {
         let n = self.members.len();
         let mut bounds = vec![Aabb::EMPTY; n];
-        let mut trees = vec![InstTree::default(); n];
+        let mut boxes = std::mem::take(&mut self.boxes);
         for g in (0..n).rev() {
             let (first, count) = self.members[g];
-            let boxes: Vec<Aabb> = self.inst[first as usize..(first + count) as usize]
-                .iter()
-                .map(|k| {
-                    let inner = match k.target {
-                        Target::Object(o) => self.objects[o as usize].bounds,
-                        Target::Group(h) => bounds[h as usize],
-                    };
-                    k.to_parent.aabb(&inner)
-                })
-                .collect();
-            bounds[g] = boxes.iter().fold(Aabb::EMPTY, |a, b| a.union(b));
-            trees[g] = InstTree::build(&boxes);
+            let members = &self.inst[first as usize..(first + count) as usize];
+            let place = |k: &Inst| {
+                let inner = match k.target {
+                    Target::Object(o) => self.objects[o as usize].bounds,
+                    Target::Group(h) => bounds[h as usize],
+                };
+                k.to_parent.aabb(&inner)
+            };
+            boxes.clear();
+            if members.len() > 65536 {
+                use rayon::prelude::*;
+                members.par_iter().with_min_len(16384).map(place).collect_into_vec(&mut boxes);
+            } else {
+                boxes.extend(members.iter().map(place));
+            }
+            self.groups[g].rebuild(&boxes, &mut self.refs);
+            bounds[g] = self.groups[g].nodes.first().map_or(Aabb::EMPTY, |n| n.bounds);
         }
-        self.groups = trees;
+        self.boxes = boxes;
     }
 
     /// Sets instance `k`'s transform (its target's space to its group's); the trees follow

@@ -31,18 +31,35 @@ pub(crate) struct InstTree {
 
 impl InstTree {
     /// The tree over `boxes` (empty ones are left out: they hold nothing to hit).
+    #[cfg(test)]
     pub(crate) fn build(boxes: &[Aabb]) -> InstTree {
-        let mut order: Vec<u32> = (0..boxes.len() as u32).filter(|&i| !boxes[i as usize].is_empty()).collect();
-        if order.is_empty() {
-            return InstTree::default();
+        let mut t = InstTree::default();
+        t.rebuild(boxes, &mut Vec::new());
+        t
+    }
+
+    /// Makes this the tree over `boxes` (empty ones are left out: they hold nothing to
+    /// hit), in this tree's arrays and `refs` (kept from build to build: fresh memory
+    /// costs a page fault per 4 KiB, more than the build itself).
+    pub(crate) fn rebuild(&mut self, boxes: &[Aabb], refs: &mut Vec<Ref>) {
+        refs.clear();
+        refs.extend(
+            (0..boxes.len() as u32)
+                .filter(|&i| !boxes[i as usize].is_empty())
+                .map(|i| Ref { c: boxes[i as usize].center().into(), i }),
+        );
+        self.nodes.clear();
+        self.order.clear();
+        if refs.is_empty() {
+            return;
         }
-        let cents: Vec<[f32; 3]> = boxes.iter().map(|b| b.center().into()).collect();
         // A binary tree with leaves of at most two holds at most 2n - 1 nodes; each subtree
         // is given exactly that many slots, so that the two sides fill disjoint ranges (the
         // unused slots are never reached).
-        let mut nodes = vec![InstNode { bounds: Aabb::EMPTY, count: 0, index: 0 }; 2 * order.len() - 1];
-        build_into(boxes, &cents, &mut order, 0, &mut nodes, 0);
-        InstTree { nodes, order }
+        self.nodes.resize(2 * refs.len() - 1, InstNode { bounds: Aabb::EMPTY, count: 0, index: 0 });
+        let mut scratch = refs.clone();
+        build_into(boxes, refs, &mut scratch, 0, &mut self.nodes, 0);
+        self.order.extend(refs.iter().map(|r| r.i));
     }
 
     /// Calls `visit(instance, t_near)` for each instance whose leaf box `ray` enters within
@@ -103,53 +120,72 @@ impl InstTree {
     }
 }
 
-/// Builds the subtree over `refs` (whose first element is `refs_at` of the whole order)
-/// into `nodes[0]` and the slots after it.
-fn build_into(boxes: &[Aabb], cents: &[[f32; 3]], refs: &mut [u32], refs_at: u32, nodes: &mut [InstNode], at: u32) {
-    let mut bounds = Aabb::EMPTY;
-    let mut cb = Aabb::EMPTY;
-    for &r in refs.iter() {
-        bounds.grow(&boxes[r as usize]);
-        cb.grow_point(cents[r as usize]);
-    }
-    if refs.len() <= LEAF {
-        nodes[0] = InstNode { bounds, count: refs.len() as u32, index: refs_at };
-        return;
-    }
-    let mid = split(boxes, cents, refs, &cb);
-    let parallel = refs.len() > PARALLEL;
-    let (lr, rr) = refs.split_at_mut(mid);
-    let left_slots = 2 * lr.len() - 1;
-    nodes[0] = InstNode { bounds, count: 0, index: at + 1 + left_slots as u32 };
-    let (_, rest) = nodes.split_at_mut(1);
-    let (ln, rn) = rest.split_at_mut(left_slots);
-    let mut left = move || build_into(boxes, cents, lr, refs_at, ln, at + 1);
-    let mut right = move || build_into(boxes, cents, rr, refs_at + mid as u32, rn, at + 1 + left_slots as u32);
-    if parallel {
-        rayon::join(left, right);
-    } else {
-        left();
-        right();
-    }
+/// An instance being sorted into the tree: its box's centre and its index. 16 bytes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Ref {
+    c: [f32; 3],
+    i: u32,
 }
 
-/// Partitions `refs` by the binned SAH on the centroids' widest axis; returns the size of
-/// the left side (the middle when the centroids coincide or no split is cheaper).
-fn split(boxes: &[Aabb], cents: &[[f32; 3]], refs: &mut [u32], cb: &Aabb) -> usize {
+/// Subtrees over more instances than this choose their split on a sample of them (every
+/// k-th), so that a level of the build is one pass over its instances.
+const SAMPLED: usize = 4096;
+
+/// Builds the subtree over `refs` (whose first element is `refs_at` of the whole order)
+/// into `nodes[0]` and the slots after it; returns its box.
+fn build_into(
+    boxes: &[Aabb],
+    refs: &mut [Ref],
+    scratch: &mut [Ref],
+    refs_at: u32,
+    nodes: &mut [InstNode],
+    at: u32,
+) -> Aabb {
+    if refs.len() <= LEAF {
+        let bounds = refs.iter().fold(Aabb::EMPTY, |b, r| b.union(&boxes[r.i as usize]));
+        nodes[0] = InstNode { bounds, count: refs.len() as u32, index: refs_at };
+        return bounds;
+    }
+    let mid = split(boxes, refs, scratch);
+    let parallel = refs.len() > PARALLEL;
+    let (lr, rr) = refs.split_at_mut(mid);
+    let (ls, rs) = scratch.split_at_mut(mid);
+    let left_slots = 2 * lr.len() - 1;
+    let (_, rest) = nodes.split_at_mut(1);
+    let (ln, rn) = rest.split_at_mut(left_slots);
+    let mut left = move || build_into(boxes, lr, ls, refs_at, ln, at + 1);
+    let mut right = move || build_into(boxes, rr, rs, refs_at + mid as u32, rn, at + 1 + left_slots as u32);
+    let (a, b) = if parallel { rayon::join(left, right) } else { (left(), right()) };
+    let bounds = a.union(&b);
+    nodes[0] = InstNode { bounds, count: 0, index: at + 1 + left_slots as u32 };
+    bounds
+}
+
+/// Partitions `refs` by the binned SAH on the centres' widest axis (chosen on a sample of
+/// them above [`SAMPLED`]); returns the size of the left side (the middle when the centres
+/// coincide or no split is cheaper).
+fn split(boxes: &[Aabb], refs: &mut [Ref], scratch: &mut [Ref]) -> usize {
+    let step = refs.len().div_ceil(SAMPLED);
+    let sample = || refs.iter().step_by(step);
+    let mut cb = Aabb::EMPTY;
+    for r in sample() {
+        cb.grow_point(r.c);
+    }
     let axis = cb.longest_axis();
     let (lo, ext) = (cb.min[axis], cb.max[axis] - cb.min[axis]);
     if ext.is_nan() || ext <= 0.0 {
         return refs.len() / 2;
     }
     let scale = BINS as f32 / ext;
-    let bin = |r: u32| (((cents[r as usize][axis] - lo) * scale) as usize).min(BINS - 1);
+    let bin = move |r: &Ref| (((r.c[axis] - lo) * scale).max(0.0) as usize).min(BINS - 1);
     let mut bb = [Aabb::EMPTY; BINS];
     let mut bc = [0u32; BINS];
-    for &r in refs.iter() {
+    for r in sample() {
         let b = bin(r);
-        bb[b].grow(&boxes[r as usize]);
+        bb[b].grow(&boxes[r.i as usize]);
         bc[b] += 1;
     }
+    let total: u32 = bc.iter().sum();
     // Costs of splitting after bin k: right sides by a sweep from the end.
     let mut right = [0.0f32; BINS];
     let (mut acc, mut n) = (Aabb::EMPTY, 0u32);
@@ -164,22 +200,29 @@ fn split(boxes: &[Aabb], cents: &[[f32; 3]], refs: &mut [u32], cb: &Aabb) -> usi
         acc.grow(&bb[k]);
         n += bc[k];
         let cost = if n > 0 { acc.half_area() * n as f32 } else { 0.0 } + right[k + 1];
-        if n > 0 && (n as usize) < refs.len() && cost < best {
+        if n > 0 && n < total && cost < best {
             (best, best_k) = (cost, k);
         }
     }
     if best == f32::INFINITY {
         return refs.len() / 2;
     }
-    // Partition in place: bins up to `best_k` to the left.
-    let (mut i, mut j) = (0, refs.len());
-    while i < j {
-        if bin(refs[i]) <= best_k {
-            i += 1;
-        } else {
-            j -= 1;
-            refs.swap(i, j);
-        }
+    // Partition through `scratch`, without branches (which side an instance goes is a
+    // coin toss a branch would mispredict): each is written to both ends, and the end it
+    // belongs to moves on.
+    let n_refs = refs.len();
+    let (mut i, mut j) = (0, n_refs);
+    for &r in refs.iter() {
+        let left = bin(&r) <= best_k;
+        scratch[i] = r;
+        scratch[j - 1] = r;
+        i += left as usize;
+        j -= !left as usize;
+    }
+    refs.copy_from_slice(scratch);
+    if i == 0 || i == refs.len() {
+        // The sample's split left one side empty on the whole.
+        return refs.len() / 2;
     }
     i
 }
