@@ -122,21 +122,24 @@ impl Affine {
         Some(Affine(std::array::from_fn(|r| [l[r][0] as f32, l[r][1] as f32, l[r][2] as f32, t[r] as f32])))
     }
 
-    /// The box of `b`'s eight corners moved by this map (empty stays empty).
+    /// The box of `b`'s eight corners moved by this map (empty stays empty): the moved
+    /// centre plus the extent through the absolute matrix (Arvo 1990), no corner by corner.
+    #[inline]
     pub fn aabb(&self, b: &Aabb) -> Aabb {
         if b.is_empty() {
             return Aabb::EMPTY;
         }
-        let mut out = Aabb::EMPTY;
-        for k in 0..8 {
-            let p = Vec3::new(
-                if k & 1 == 0 { b.min[0] } else { b.max[0] },
-                if k & 2 == 0 { b.min[1] } else { b.max[1] },
-                if k & 4 == 0 { b.min[2] } else { b.max[2] },
-            );
-            out.grow_point(self.point(p).into());
-        }
-        out
+        let m = &self.0;
+        let c = self.point(b.center());
+        let e = (b.hi() - b.lo()) * 0.5;
+        let r = Vec3::new(
+            m[0][0].abs() * e.x + m[0][1].abs() * e.y + m[0][2].abs() * e.z,
+            m[1][0].abs() * e.x + m[1][1].abs() * e.y + m[1][2].abs() * e.z,
+            m[2][0].abs() * e.x + m[2][1].abs() * e.y + m[2][2].abs() * e.z,
+        );
+        // Widened by a few ulps of the box's size: rounding must never leave a corner out.
+        let pad = (c.abs() + r) * (4.0 * f32::EPSILON);
+        Aabb { min: (c - r - pad).into(), max: (c + r + pad).into() }
     }
 
     /// `ray` in the space this map takes to world space, when `self` is that map's inverse:

@@ -44,7 +44,7 @@ pub(crate) struct Layer<'s> {
     members: Vec<(u32, u32)>,
     /// Arrays kept from one rebuild to the next.
     boxes: Vec<Aabb>,
-    refs: Vec<crate::inst_bvh::Ref>,
+    scratch: crate::inst_bvh::Scratch,
 }
 
 impl<'s> Layer<'s> {
@@ -82,7 +82,7 @@ impl<'s> Layer<'s> {
             .collect();
         let members = i.groups.iter().map(|g| (g.first, g.count)).collect();
         let groups = vec![InstTree::default(); i.groups.len()];
-        let mut l = Layer { objects, inst, groups, members, boxes: Vec::new(), refs: Vec::new() };
+        let mut l = Layer { objects, inst, groups, members, boxes: Vec::new(), scratch: Default::default() };
         l.rebuild();
         l
     }
@@ -110,7 +110,7 @@ impl<'s> Layer<'s> {
             } else {
                 boxes.extend(members.iter().map(place));
             }
-            self.groups[g].rebuild(&boxes, &mut self.refs);
+            self.groups[g].rebuild(&boxes, &mut self.scratch);
             bounds[g] = self.groups[g].nodes.first().map_or(Aabb::EMPTY, |n| n.bounds);
         }
         self.boxes = boxes;

@@ -34,14 +34,15 @@ impl InstTree {
     #[cfg(test)]
     pub(crate) fn build(boxes: &[Aabb]) -> InstTree {
         let mut t = InstTree::default();
-        t.rebuild(boxes, &mut Vec::new());
+        t.rebuild(boxes, &mut Scratch::default());
         t
     }
 
     /// Makes this the tree over `boxes` (empty ones are left out: they hold nothing to
     /// hit), in this tree's arrays and `refs` (kept from build to build: fresh memory
     /// costs a page fault per 4 KiB, more than the build itself).
-    pub(crate) fn rebuild(&mut self, boxes: &[Aabb], refs: &mut Vec<Ref>) {
+    pub(crate) fn rebuild(&mut self, boxes: &[Aabb], scratch: &mut Scratch) {
+        let Scratch { refs, sorted, keys, tmp } = scratch;
         refs.clear();
         refs.extend(
             (0..boxes.len() as u32)
@@ -57,8 +58,15 @@ impl InstTree {
         // is given exactly that many slots, so that the two sides fill disjoint ranges (the
         // unused slots are never reached).
         self.nodes.resize(2 * refs.len() - 1, InstNode { bounds: Aabb::EMPTY, count: 0, index: 0 });
-        let mut scratch = refs.clone();
-        build_into(boxes, refs, &mut scratch, 0, &mut self.nodes, 0);
+        if refs.len() > LBVH {
+            morton_order(refs, sorted, keys, tmp);
+            build_lbvh(boxes, sorted, keys, 0, &mut self.nodes, 0);
+            std::mem::swap(refs, sorted);
+        } else {
+            sorted.clear();
+            sorted.extend_from_slice(refs);
+            build_into(boxes, refs, sorted, 0, &mut self.nodes, 0);
+        }
         self.order.extend(refs.iter().map(|r| r.i));
     }
 
@@ -125,6 +133,103 @@ impl InstTree {
 pub(crate) struct Ref {
     c: [f32; 3],
     i: u32,
+}
+
+/// Groups of more instances than this are built as a linear BVH (Lauterbach et al. 2009:
+/// sorted along a Morton curve, split where the codes' highest differing bit changes),
+/// several times faster than binning at every level, for the trees that must be rebuilt
+/// every frame when many instances move (docs/PERF.md, "Instances").
+const LBVH: usize = 1 << 16;
+
+/// The arrays a build works in, kept from one rebuild to the next (fresh memory costs a
+/// page fault per 4 KiB).
+#[derive(Default)]
+pub(crate) struct Scratch {
+    refs: Vec<Ref>,
+    sorted: Vec<Ref>,
+    keys: Vec<u64>,
+    tmp: Vec<u64>,
+}
+
+/// `refs` sorted along the Morton curve of their centres (10 bits an axis over their
+/// centres' box) into `sorted`, and `keys` holding, in the same order, each one's code in
+/// the high 32 bits (and its place in `refs` in the low ones).
+fn morton_order(refs: &[Ref], sorted: &mut Vec<Ref>, keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
+    let mut cb = Aabb::EMPTY;
+    for r in refs.iter() {
+        cb.grow_point(r.c);
+    }
+    let ext = cb.extent();
+    let scale: [f32; 3] = std::array::from_fn(|k| if ext[k] > 0.0 { 1023.0 / ext[k] } else { 0.0 });
+    let spread = |v: u32| {
+        let mut x = v & 0x3ff;
+        x = (x | (x << 16)) & 0x030000ff;
+        x = (x | (x << 8)) & 0x0300f00f;
+        x = (x | (x << 4)) & 0x030c30c3;
+        (x | (x << 2)) & 0x09249249
+    };
+    let code = |r: &Ref| -> u64 {
+        let q = |k: usize| (((r.c[k] - cb.min[k]) * scale[k]).max(0.0) as u32).min(1023);
+        (spread(q(0)) | (spread(q(1)) << 1) | (spread(q(2)) << 2)) as u64
+    };
+    {
+        use rayon::prelude::*;
+        refs.par_iter()
+            .enumerate()
+            .with_min_len(1 << 15)
+            .map(|(i, r)| (code(r) << 32) | i as u64)
+            .collect_into_vec(keys);
+    }
+    tmp.clear();
+    tmp.resize(keys.len(), 0);
+    // Least significant digit first, 8 bits a pass (30-bit codes: four passes).
+    for shift in [32u32, 40, 48, 56] {
+        let mut count = [0usize; 257];
+        for k in keys.iter() {
+            count[((k >> shift) & 0xff) as usize + 1] += 1;
+        }
+        for d in 0..256 {
+            count[d + 1] += count[d];
+        }
+        for &k in keys.iter() {
+            let d = ((k >> shift) & 0xff) as usize;
+            tmp[count[d]] = k;
+            count[d] += 1;
+        }
+        std::mem::swap(keys, tmp);
+    }
+    sorted.clear();
+    sorted.extend(keys.iter().map(|&k| refs[(k & 0xffff_ffff) as usize]));
+}
+
+/// The linear BVH over `refs` sorted by `codes` (as [`morton_order`] leaves them) into
+/// `nodes[0]` and the slots after it (laid out as [`build_into`] does); returns its box.
+fn build_lbvh(boxes: &[Aabb], refs: &[Ref], codes: &[u64], refs_at: u32, nodes: &mut [InstNode], at: u32) -> Aabb {
+    let n = refs.len();
+    if n <= LEAF {
+        let bounds = refs.iter().fold(Aabb::EMPTY, |b, r| b.union(&boxes[r.i as usize]));
+        nodes[0] = InstNode { bounds, count: n as u32, index: refs_at };
+        return bounds;
+    }
+    let (first, last) = ((codes[0] >> 32) as u32, (codes[n - 1] >> 32) as u32);
+    let mid = if first == last {
+        n / 2
+    } else {
+        // The first code with the highest differing bit set.
+        let bit = 31 - (first ^ last).leading_zeros();
+        codes.partition_point(|&c| (c >> 32) as u32 & (1 << bit) == 0).clamp(1, n - 1)
+    };
+    let left_slots = 2 * mid - 1;
+    let (_, rest) = nodes.split_at_mut(1);
+    let (ln, rn) = rest.split_at_mut(left_slots);
+    let (lr, rr) = refs.split_at(mid);
+    let (lc, rc) = codes.split_at(mid);
+    let mut left = move || build_lbvh(boxes, lr, lc, refs_at, ln, at + 1);
+    let mut right = move || build_lbvh(boxes, rr, rc, refs_at + mid as u32, rn, at + 1 + left_slots as u32);
+    let (a, b) = if n > PARALLEL { rayon::join(left, right) } else { (left(), right()) };
+    let bounds = a.union(&b);
+    nodes[0] = InstNode { bounds, count: 0, index: at + 1 + left_slots as u32 };
+    bounds
 }
 
 /// Subtrees over more instances than this choose their split on a sample of them (every
@@ -240,7 +345,7 @@ mod tests {
             s = megaray_base::hash32(s);
             megaray_base::u01(s)
         };
-        for n in [1usize, 2, 3, 17, 1000, 20_000] {
+        for n in [1usize, 2, 3, 17, 1000, 20_000, 70_000] {
             let boxes: Vec<Aabb> = (0..n)
                 .map(|_| {
                     let c = Vec3::new(rnd(), rnd(), rnd()) * 100.0;
