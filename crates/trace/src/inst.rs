@@ -144,27 +144,25 @@ impl<'s> Layer<'s> {
         let t_max = prior.map_or(ray.t_max, |h| h.t);
         let mut q = Query { best: prior, t_max, any, missing: None, lod, path: Vec::new(), skip_to };
         let world = Ray { t_max, ..*ray };
-        self.group(0, &world, &Path::WORLD, &mut q);
+        self.group(0, &world, &mut q);
         match q.missing {
             Some((path, inner)) => Traced::Pending(Box::new(Pending::inside(q.best, any, path, *inner))),
             None => Traced::Done(q.best),
         }
     }
 
-    /// Traces `ray` (in group `g`'s space) through `g`'s instances; `path` maps that space
-    /// to the world.
-    fn group(&self, g: u32, ray: &Ray, path: &Path, q: &mut Query<'_>) {
+    /// Traces `ray` (in group `g`'s space) through `g`'s instances.
+    fn group(&self, g: u32, ray: &Ray, q: &mut Query<'_>) {
         let Some(tree) = self.groups.get(g as usize) else { return };
         let first = self.members[g as usize].0;
         let t_max = std::cell::Cell::new(q.t_max);
         tree.walk(ray, &|| t_max.get(), |k| {
             let inst = &self.inst[(first + k) as usize];
             let local = Ray { t_max: q.t_max, ..inst.to_local.ray(ray) };
-            let path = path.then(inst);
             q.path.push(first + k);
             match inst.target {
-                Target::Group(h) => self.group(h, &local, &path, q),
-                Target::Object(o) => self.object(o, &local, &path, q),
+                Target::Group(h) => self.group(h, &local, q),
+                Target::Object(o) => self.object(o, &local, q),
             }
             q.path.pop();
             t_max.set(q.t_max);
@@ -173,7 +171,17 @@ impl<'s> Layer<'s> {
     }
 
     /// Traces `ray` (in object `o`'s space) through the object.
-    fn object(&self, o: u32, ray: &Ray, path: &Path, q: &mut Query<'_>) {
+    fn object(&self, o: u32, ray: &Ray, q: &mut Query<'_>) {
+        let obj = &self.objects[o as usize];
+        if q.skip_to.is_none() && q.lod.is_none() && obj.pager.is_none() {
+            // Unpaged, full detail: the objects' fastest way in (`Tracer::intersect`).
+            let f = if q.any { obj.unpaged::<true>(ray) } else { obj.unpaged::<false>(ray) };
+            if let Some(h) = obj.hit_of(f) {
+                q.t_max = h.t;
+                q.best = Some(self.place(&q.path, h));
+            }
+            return;
+        }
         let mut from = None;
         if let Some((p, _)) = &q.skip_to {
             if *p != q.path {
@@ -182,14 +190,27 @@ impl<'s> Layer<'s> {
             }
             from = q.skip_to.take().map(|(_, inner)| Box::new(inner));
         }
-        match self.objects[o as usize].traverse_with(ray, q.any, from, 0, q.lod) {
+        match obj.traverse_with(ray, q.any, from, 0, q.lod) {
             Traced::Done(Some(h)) if h.t < q.t_max || q.any => {
                 q.t_max = h.t;
-                q.best = Some(path.place(h));
+                q.best = Some(self.place(&q.path, h));
             }
             Traced::Done(_) => {}
             Traced::Pending(p) => q.missing = Some((q.path.clone(), p)),
         }
+    }
+}
+
+impl Layer<'_> {
+    /// The instances `path` (from group 0 down) composed: the object's space to the world
+    /// and back, and the outermost material override.
+    fn path(&self, path: &[u32]) -> Path {
+        path.iter().fold(Path::WORLD, |p, &k| p.then(&self.inst[k as usize]))
+    }
+
+    /// An object-space hit reached through `path`, in the world.
+    fn place(&self, path: &[u32], h: Hit) -> Hit {
+        self.path(path).place(h)
     }
 }
 

@@ -92,11 +92,34 @@ impl InstTree {
             }
             (near <= far).then_some(near)
         };
-        let mut stack: Vec<(u32, f32)> = Vec::with_capacity(64);
-        if let Some(t) = enter(&self.nodes[0].bounds, t_max()) {
-            stack.push((0, t));
+        // The stack on the machine stack; a tree deeper than it spills to the heap.
+        let mut fixed = [(0u32, 0f32); 64];
+        let mut sp = 0;
+        let mut spill: Vec<(u32, f32)> = Vec::new();
+        fn push(e: (u32, f32), fixed: &mut [(u32, f32); 64], sp: &mut usize, spill: &mut Vec<(u32, f32)>) {
+            if *sp == fixed.len() {
+                spill.extend_from_slice(&fixed[..]);
+                *sp = 0;
+            }
+            fixed[*sp] = e;
+            *sp += 1;
         }
-        while let Some((i, t)) = stack.pop() {
+        if let Some(t) = enter(&self.nodes[0].bounds, t_max()) {
+            push((0, t), &mut fixed, &mut sp, &mut spill);
+        }
+        loop {
+            if sp == 0 {
+                // Refill from the spill (only a degenerate, very deep tree has one).
+                let n = spill.len().min(fixed.len());
+                if n == 0 {
+                    return;
+                }
+                fixed[..n].copy_from_slice(&spill[spill.len() - n..]);
+                spill.truncate(spill.len() - n);
+                sp = n;
+            }
+            sp -= 1;
+            let (i, t) = fixed[sp];
             if t > t_max() {
                 continue;
             }
@@ -114,14 +137,12 @@ impl InstTree {
             match (enter(&self.nodes[l as usize].bounds, tm), enter(&self.nodes[r as usize].bounds, tm)) {
                 (Some(a), Some(b)) => {
                     // The nearer popped first.
-                    if a <= b {
-                        stack.extend([(r, b), (l, a)]);
-                    } else {
-                        stack.extend([(l, a), (r, b)]);
-                    }
+                    let (near, far) = if a <= b { ((l, a), (r, b)) } else { ((r, b), (l, a)) };
+                    push(far, &mut fixed, &mut sp, &mut spill);
+                    push(near, &mut fixed, &mut sp, &mut spill);
                 }
-                (Some(a), None) => stack.push((l, a)),
-                (None, Some(b)) => stack.push((r, b)),
+                (Some(a), None) => push((l, a), &mut fixed, &mut sp, &mut spill),
+                (None, Some(b)) => push((r, b), &mut fixed, &mut sp, &mut spill),
                 (None, None) => {}
             }
         }
