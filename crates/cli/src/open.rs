@@ -95,22 +95,32 @@ fn sanitize(name: &str) -> String {
     }
 }
 
-/// The pbrt-v4 scene among `inputs` (which must then be the only input), parsed, its
-/// skipped statements noted one line per kind.
+/// The scene among `inputs` whose structure the build keeps (objects and instances), parsed,
+/// what it skipped noted one line per kind: a pbrt-v4 scene (which must be the only input),
+/// or a glTF file given alone (several inputs are merged, flattened, as other models).
 pub(crate) fn pbrt_scene(inputs: &[PathBuf], bars: &dyn Progress) -> Result<Option<megaray_import::pbrt::PbrtScene>> {
-    let is_pbrt = |p: &PathBuf| {
-        let n = p.to_string_lossy();
-        n.ends_with(".pbrt") || n.ends_with(".pbrt.gz")
+    let name = |p: &PathBuf| p.to_string_lossy().to_ascii_lowercase();
+    let is_pbrt = |p: &PathBuf| name(p).ends_with(".pbrt") || name(p).ends_with(".pbrt.gz");
+    let is_gltf = |p: &PathBuf| name(p).ends_with(".gltf") || name(p).ends_with(".glb");
+    let scene = match inputs {
+        [p] if is_gltf(p) => (p, megaray_import::gltf_scene::read_scene(p)?),
+        _ => match inputs.iter().find(|p| is_pbrt(p)) {
+            None => return Ok(None),
+            Some(p) if inputs.len() > 1 => {
+                anyhow::bail!("{}: a pbrt scene is built on its own (give it as the only input)", p.display())
+            }
+            Some(p) => (p, megaray_import::pbrt::read_scene(p)?),
+        },
     };
-    let Some(p) = inputs.iter().find(|p| is_pbrt(p)) else { return Ok(None) };
-    if inputs.len() > 1 {
-        anyhow::bail!("{}: a pbrt scene is built on its own (give it as the only input)", p.display());
-    }
-    let scene = megaray_import::pbrt::read_scene(p)?;
+    note(scene.0, &scene.1, bars);
+    Ok(Some(scene.1))
+}
+
+/// One note line per kind of thing a scene's reader skipped.
+fn note(p: &Path, scene: &megaray_import::pbrt::PbrtScene, bars: &dyn Progress) {
     for (what, n) in &scene.skipped {
         bars.note(&format!("{}: skipped {n} x {what} (not drawn by megaray)", p.display()));
     }
-    Ok(Some(scene))
 }
 
 /// The camera the scene file's source gave (a pbrt scene's), at `w` x `h`; its field of

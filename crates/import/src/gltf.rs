@@ -42,7 +42,7 @@ thread_local! {
 /// Runs `f` (code that calls into the gltf crate), catching a panic: `Err` holds its message.
 /// The process's panic hook is wrapped once so that it says nothing for a panic caught here
 /// (and everything, as before, for any other).
-fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+pub(crate) fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
     static WRAP: std::sync::Once = std::sync::Once::new();
     WRAP.call_once(|| {
         let previous = std::panic::take_hook();
@@ -62,12 +62,12 @@ fn guarded<T>(f: impl FnOnce() -> T) -> Result<T, String> {
 }
 
 /// The vertex data of one primitive, read from the buffers.
-struct PrimData {
-    positions: Vec<[f32; 3]>,
-    normals: Option<Vec<[f32; 3]>>,
-    uvs: Option<Vec<[f32; 2]>>,
+pub(crate) struct PrimData {
+    pub(crate) positions: Vec<[f32; 3]>,
+    pub(crate) normals: Option<Vec<[f32; 3]>>,
+    pub(crate) uvs: Option<Vec<[f32; 2]>>,
     colors: Option<Vec<[f32; 4]>>,
-    indices: Option<Vec<u32>>,
+    pub(crate) indices: Option<Vec<u32>>,
 }
 
 /// Reads a glTF or GLB file into `sink`.
@@ -79,39 +79,9 @@ pub(crate) fn import(
     progress: &dyn Progress,
 ) -> Result<ImportSummary, ImportError> {
     let err = |loc: Option<String>, msg: String| ImportError::new(path, loc, msg);
-    let mut data = Vec::new();
-    file.read_to_end(&mut data).map_err(|e| err(None, format!("read error: {e}")))?;
+    let (doc, buffers) = open_doc(path, &mut file)?;
     progress.inc(len);
-    let is_glb = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
-    if is_glb && !data.starts_with(b"glTF") {
-        return Err(err(Some("byte 0".into()), "not a GLB file (bad magic: it does not start with 'glTF')".into()));
-    }
-    if data.starts_with(b"glTF") {
-        // Check the GLB header here: the gltf crate trusts its length field.
-        let word = |i: usize| data.get(i..i + 4).map(|b| u32::from_le_bytes(b.try_into().unwrap()));
-        let (version, length) = (word(4).unwrap_or(0), word(8).unwrap_or(0));
-        if version != 2 {
-            return Err(err(Some("byte 4".into()), format!("unsupported GLB version {version} (expected 2)")));
-        }
-        if (length as usize) < 20 || length as usize > data.len() {
-            return Err(err(
-                Some("byte 8".into()),
-                format!("truncated or bad GLB: the header says {length} bytes, the file has {}", data.len()),
-            ));
-        }
-    }
     let base = path.parent().unwrap_or(Path::new("."));
-    let loaded = guarded(|| {
-        let g = ::gltf::Gltf::from_slice(&data)?;
-        let buffers = ::gltf::import_buffers(&g.document, Some(base), g.blob)?;
-        Ok::<_, ::gltf::Error>((g.document, buffers))
-    });
-    let (doc, buffers) = match loaded {
-        Ok(Ok(x)) => x,
-        Ok(Err(e)) => return Err(err(None, format!("invalid glTF: {e}"))),
-        Err(p) => return Err(err(None, format!("malformed glTF (the parser failed: {p})"))),
-    };
-    drop(data);
 
     // Phase 1, all under `catch_unwind`: where each mesh goes, the materials.
     let plan = match guarded(|| plan(&doc, base)) {
@@ -168,7 +138,7 @@ struct MeshInfo {
 }
 
 /// What the scene walk produces.
-struct Plan {
+pub(crate) struct Plan {
     /// World matrix and mesh index of every node with a mesh, in depth-first order.
     instances: Vec<(Mat4, usize)>,
     meshes: Vec<MeshInfo>,
@@ -178,7 +148,7 @@ struct Plan {
 
 /// Walks the default (or first) scene. The node hierarchy must be a tree: a node with
 /// several parents, or a root with a parent, is an error (this also rules out cycles).
-fn plan(doc: &::gltf::Document, base: &Path) -> Result<Plan, (Option<String>, String)> {
+pub(crate) fn plan(doc: &::gltf::Document, base: &Path) -> Result<Plan, (Option<String>, String)> {
     let scene = doc
         .default_scene()
         .or_else(|| doc.scenes().next())
@@ -229,7 +199,7 @@ fn plan(doc: &::gltf::Document, base: &Path) -> Result<Plan, (Option<String>, St
 
 /// Reads the attributes of a primitive. Attributes whose length differs from the
 /// positions' are dropped.
-fn read_primitive(
+pub(crate) fn read_primitive(
     doc: &::gltf::Document,
     mesh: usize,
     prim: usize,
@@ -324,7 +294,7 @@ fn emit(
 }
 
 /// Converts a glTF material.
-fn convert_material(doc: &::gltf::Document, m: &::gltf::Material, base: &Path) -> Material {
+pub(crate) fn convert_material(doc: &::gltf::Document, m: &::gltf::Material, base: &Path) -> Material {
     let pbr = m.pbr_metallic_roughness();
     let c = pbr.base_color_factor();
     // Read the image's URI from the JSON (the crate's `Image::source` panics on an image
@@ -377,4 +347,45 @@ mod tests {
         assert_eq!(percent_decode("a%2").to_str(), Some("a%2"));
         assert_eq!(percent_decode("tex/x.png").to_str(), Some("tex/x.png"));
     }
+}
+
+/// Reads and parses a glTF or GLB file with its buffers (its header checked first, the
+/// parser's panics turned into errors).
+pub(crate) fn open_doc(
+    path: &Path,
+    file: &mut File,
+) -> Result<(::gltf::Document, Vec<::gltf::buffer::Data>), ImportError> {
+    let err = |loc: Option<String>, msg: String| ImportError::new(path, loc, msg);
+    let mut data = Vec::new();
+    file.read_to_end(&mut data).map_err(|e| err(None, format!("read error: {e}")))?;
+    let is_glb = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("glb"));
+    if is_glb && !data.starts_with(b"glTF") {
+        return Err(err(Some("byte 0".into()), "not a GLB file (bad magic: it does not start with 'glTF')".into()));
+    }
+    if data.starts_with(b"glTF") {
+        // Check the GLB header here: the gltf crate trusts its length field.
+        let word = |i: usize| data.get(i..i + 4).map(|b| u32::from_le_bytes(b.try_into().unwrap()));
+        let (version, length) = (word(4).unwrap_or(0), word(8).unwrap_or(0));
+        if version != 2 {
+            return Err(err(Some("byte 4".into()), format!("unsupported GLB version {version} (expected 2)")));
+        }
+        if (length as usize) < 20 || length as usize > data.len() {
+            return Err(err(
+                Some("byte 8".into()),
+                format!("truncated or bad GLB: the header says {length} bytes, the file has {}", data.len()),
+            ));
+        }
+    }
+    let base = path.parent().unwrap_or(Path::new("."));
+    let loaded = guarded(|| {
+        let g = ::gltf::Gltf::from_slice(&data)?;
+        let buffers = ::gltf::import_buffers(&g.document, Some(base), g.blob)?;
+        Ok::<_, ::gltf::Error>((g.document, buffers))
+    });
+    let (doc, buffers) = match loaded {
+        Ok(Ok(x)) => x,
+        Ok(Err(e)) => return Err(err(None, format!("invalid glTF: {e}"))),
+        Err(p) => return Err(err(None, format!("malformed glTF (the parser failed: {p})"))),
+    };
+    Ok((doc, buffers))
 }

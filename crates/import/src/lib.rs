@@ -43,6 +43,7 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 
 mod gltf;
+pub mod gltf_scene;
 mod obj;
 pub mod pbrt;
 mod ply;
