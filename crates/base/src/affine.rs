@@ -114,7 +114,7 @@ impl Affine {
             let (r0, r1) = ([1, 0, 0][c], [2, 2, 1][c]);
             let (c0, c1) = ([1, 0, 0][r], [2, 2, 1][r]);
             let minor = m(r0, c0) * m(r1, c1) - m(r0, c1) * m(r1, c0);
-            let sign = if (r + c) % 2 == 0 { 1.0 } else { -1.0 };
+            let sign = if (r + c).is_multiple_of(2) { 1.0 } else { -1.0 };
             sign * minor / det
         };
         let l: [[f64; 3]; 3] = std::array::from_fn(|r| std::array::from_fn(|c| inv(r, c)));

@@ -316,9 +316,10 @@ pub struct RenderArgs {
     /// Camera at centre + offset * diagonal (default 0,0.3,1.6; the `close` camera is 0,0.3,0.6).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     cam_offset: Option<Vec3>,
-    /// Direction toward the directional light (lights diffuse and phong when there is no --env/--sky).
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, default_value = "0.5,1,0.8", allow_hyphen_values = true)]
-    light: Vec3,
+    /// Direction toward the directional light (lights diffuse and phong when there is no
+    /// --env/--sky) [default: the scene's sun if its source gave one, else 0.5,1,0.8].
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    light: Option<Vec3>,
     /// Primary samples per pixel per frame (the first frame's first sample is the pixel centre).
     #[arg(long, value_name = "N", default_value_t = 1)]
     spp: u32,
@@ -411,6 +412,12 @@ pub struct RenderArgs {
     /// (one JSON line per frame with --json); the image is the last frame.
     #[arg(long, value_name = "N[:DEG]")]
     orbit: Option<String>,
+    /// Rigid motion of a scene's instances: N frames, the instances named NAME (default: the
+    /// top-level ones) spinning about their centres or orbiting their group's centre; only
+    /// the instance trees are rebuilt each frame (their time in --json); the image is the last
+    /// frame.
+    #[arg(long, value_name = "N[:spin|:orbit][:NAME]")]
+    animate: Option<String>,
 }
 
 impl RenderArgs {
@@ -425,7 +432,7 @@ impl RenderArgs {
             up: Vec3::Y,
             fov: 60.0,
             cam_offset: None,
-            light: Vec3::new(0.5, 1.0, 0.8),
+            light: None,
             spp: 1,
             shader: "auto".into(),
             env: None,
@@ -452,6 +459,7 @@ impl RenderArgs {
             deadline: None,
             lod_error: 1.0,
             orbit: None,
+            animate: None,
         }
     }
 }
@@ -489,7 +497,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     if !(a.fov > 0.0 && a.fov < 180.0) {
         bail!("--fov must be between 0 and 180 degrees");
     }
-    if a.light.length() == 0.0 {
+    if a.light.is_some_and(|l| l.length() == 0.0) {
         bail!("--light must not be 0,0,0");
     }
     let shader: Builtin = a.shader.parse().map_err(|e: String| anyhow::anyhow!("--shader: {e}"))?;
@@ -542,8 +550,19 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         Some(p) => Some(read_exr(p)?.0),
         None => None,
     };
+    let animate = a.animate.as_deref().map(crate::animate::parse_animate).transpose()?;
     let opened = crate::open::scene_for(Some(&a.scene), &a.open, bars)?;
     let (scene, pager) = a.paging.open(&opened.path)?;
+    // The scene's own environment map and sun (a pbrt scene's), where none was given.
+    let own_lights = crate::open::scene_lights(&scene);
+    let map = match (map, &own_lights.0) {
+        (None, Some((path, scale))) if a.sky.is_none() => {
+            let mut m = EnvMap::load(path)?;
+            m.scale = *scale;
+            Some(m)
+        }
+        (m, _) => m,
+    };
     let b = scene.header().bounds;
     let (w, h) = a.res;
     let at = a.at.unwrap_or(b.center());
@@ -564,7 +583,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     let own = if a.eye.is_none() && a.at.is_none() { crate::open::scene_camera(&scene, w, h) } else { None };
     let cam = own.unwrap_or_else(|| Camera::look_at(eye, at, a.up, a.fov, w, h));
     let mut settings = RenderSettings::new(cam);
-    settings.light = a.light;
+    settings.light = a.light.or(own_lights.1).unwrap_or(megaray_render::default_light());
     settings.spp = a.spp;
     settings.shader = shader;
     settings.light_samples = a.light_samples;
@@ -583,12 +602,12 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     let mut renderer = Renderer::new(settings, &b);
     if let Some(mut map) = map {
         map.rotate = a.env_rotate.to_radians();
-        map.scale = a.env_scale;
+        map.scale *= a.env_scale;
         renderer = renderer.with_environment(Arc::new(Environment::new(map, a.env_lights, a.light_subsets)));
     }
     let setup = t.elapsed().as_secs_f64();
     let stop = Stop { frames: a.frames, time: a.time.map(Duration::from_secs_f64) };
-    let tracer = match &pager {
+    let mut tracer = match &pager {
         Some(p) => Tracer::paged(p),
         None => {
             // Unpaged, a scene small enough to read at once has all its tiles checked now,
@@ -604,6 +623,10 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         }
     }
     .with_lod_error(a.lod_error);
+    if let Some(an) = &animate {
+        let img = crate::animate::run(an, &scene, &renderer, &mut tracer, &pool, a.json)?;
+        return save(&img, &a.out, exr, a.exposure, curve);
+    }
     if let Some(spec) = &a.orbit {
         let o = crate::paging::parse_orbit(spec)?;
         let (fov, up) = (a.fov, a.up);

@@ -2,6 +2,7 @@
 //! option structs, draws progress bars and prints results. Everything else lives in the
 //! crates (`megaray-gen`, `-import`, `-build`, `-scene`, `-trace`, `-render`).
 
+mod animate;
 mod bench;
 mod cmd;
 mod fault;

@@ -141,3 +141,19 @@ pub(crate) fn scene_camera(scene: &megaray_scene::Scene, w: u32, h: u32) -> Opti
         if w < h { 2.0 * ((fov.to_radians() / 2.0).tan() * h as f32 / w as f32).atan().to_degrees() } else { fov };
     Some(megaray_base::Camera::look_at(vec("eye")?, vec("at")?, vec("up")?, vfov, w, h))
 }
+
+/// The environment map (file, scale) and the sun's direction the scene's source gave.
+pub(crate) fn scene_lights(scene: &megaray_scene::Scene) -> (Option<(PathBuf, f32)>, Option<megaray_base::Vec3>) {
+    let Some(v) = scene.settings().and_then(|s| serde_json::from_str::<serde_json::Value>(s).ok()) else {
+        return (None, None);
+    };
+    let env = v.get("environment").and_then(|e| {
+        let file = PathBuf::from(e.get("file")?.as_str()?);
+        Some((file, e.get("scale").and_then(|s| s.as_f64()).unwrap_or(1.0) as f32))
+    });
+    let sun = v.get("sun").and_then(|s| s.get("dir")).and_then(|d| d.as_array()).and_then(|a| {
+        let c = |i: usize| a.get(i).and_then(|x| x.as_f64()).map(|x| x as f32);
+        Some(megaray_base::Vec3::new(c(0)?, c(1)?, c(2)?)).filter(|d| d.length() > 0.0)
+    });
+    (env, sun)
+}

@@ -337,18 +337,6 @@ fn percent_decode(uri: &str) -> PathBuf {
     PathBuf::from(String::from_utf8_lossy(&out).into_owned())
 }
 
-#[cfg(test)]
-mod tests {
-    use super::percent_decode;
-
-    #[test]
-    fn percent_decoding() {
-        assert_eq!(percent_decode("a%20b.png").to_str(), Some("a b.png"));
-        assert_eq!(percent_decode("a%2").to_str(), Some("a%2"));
-        assert_eq!(percent_decode("tex/x.png").to_str(), Some("tex/x.png"));
-    }
-}
-
 /// Reads and parses a glTF or GLB file with its buffers (its header checked first, the
 /// parser's panics turned into errors).
 pub(crate) fn open_doc(
@@ -388,4 +376,16 @@ pub(crate) fn open_doc(
         Err(p) => return Err(err(None, format!("malformed glTF (the parser failed: {p})"))),
     };
     Ok((doc, buffers))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::percent_decode;
+
+    #[test]
+    fn percent_decoding() {
+        assert_eq!(percent_decode("a%20b.png").to_str(), Some("a b.png"));
+        assert_eq!(percent_decode("a%2").to_str(), Some("a%2"));
+        assert_eq!(percent_decode("tex/x.png").to_str(), Some("tex/x.png"));
+    }
 }

@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 
+#[allow(unused_imports)]
 pub use megaray_testkit::*;
 
 /// Path of the megaray binary built for these tests.

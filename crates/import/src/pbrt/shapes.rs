@@ -25,7 +25,7 @@ pub(crate) fn shape(kind: &str, p: &Params, file: &Path, loc: &Loc) -> Result<Op
                 None if pts.len() == per => (0..per).map(|i| i as f64).collect(),
                 None => return Err(loc.err(format!("{kind} without \"integer indices\""))),
             };
-            if idx.len() % per != 0 {
+            if !idx.len().is_multiple_of(per) {
                 return Err(loc.err(format!("{kind}: {} indices (not a multiple of {per})", idx.len())));
             }
             let mut indices = Vec::with_capacity(idx.len() / per * 3);
@@ -130,9 +130,15 @@ impl TriangleSink for Moved<'_> {
         }
         if self.flip {
             p.swap(1, 2);
-            a.normal.as_mut().map(|n| n.swap(1, 2));
-            a.uv.as_mut().map(|n| n.swap(1, 2));
-            a.color.as_mut().map(|n| n.swap(1, 2));
+            if let Some(n) = a.normal.as_mut() {
+                n.swap(1, 2);
+            }
+            if let Some(uv) = a.uv.as_mut() {
+                uv.swap(1, 2);
+            }
+            if let Some(c) = a.color.as_mut() {
+                c.swap(1, 2);
+            }
         }
         self.sink.triangle(p, &a)
     }

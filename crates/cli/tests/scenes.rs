@@ -1,0 +1,78 @@
+//! Scenes with instances end to end: a pbrt-v4 scene and a generated forest built, described
+//! by `info`, rendered from their own camera, animated; bad scenes refused in one line.
+
+mod common;
+use common::*;
+
+const SCENE: &str = r#"LookAt 0 3 12  0 0 0  0 1 0
+Camera "perspective" "float fov" 40
+WorldBegin
+LightSource "distant" "point3 from" [1 2 1] "point3 to" [0 0 0]
+ObjectBegin "quad"
+  Shape "bilinearmesh" "point3 P" [-1 -1 0  1 -1 0  -1 1 0  1 1 0]
+ObjectEnd
+ObjectBegin "row"
+  Translate -3 0 0  ObjectInstance "quad"
+  Translate 3 0 0   ObjectInstance "quad"
+  Translate 3 0 0   ObjectInstance "quad"
+ObjectEnd
+AttributeBegin Translate 0 2 0 ObjectInstance "row" AttributeEnd
+AttributeBegin Translate 0 -2 0 Rotate 30 0 1 0 ObjectInstance "row" AttributeEnd
+Shape "trianglemesh" "point3 P" [-6 -4 -1  6 -4 -1  0 -4 -8] "integer indices" [0 1 2]
+"#;
+
+#[test]
+fn a_pbrt_scene_builds_renders_from_its_camera_and_animates() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    std::fs::write(d("s.pbrt"), SCENE).unwrap();
+    let (code, _, err) = run(&["build", &d("s.pbrt"), "-o", &d("s.mray")]);
+    assert_eq!(code, 0, "{err}");
+    let (code, out, err) = run(&["info", &d("s.mray"), "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    // 3 unique triangles: a quad (2) and the world's triangle; 6 quads shown.
+    assert_eq!(v["triangles"], 3);
+    assert_eq!(v["instances"]["instanced_triangles"], "13");
+    let (code, _, err) = run(&["render", &d("s.mray"), "-o", &d("s.png"), "--res", "64x48", "--shader", "normal"]);
+    assert_eq!(code, 0, "{err}");
+    let img = image::open(d("s.png")).unwrap().to_rgb8();
+    // The scene's camera looks at the quads: the middle of the image is not background.
+    let bg = img.get_pixel(0, 0);
+    assert_ne!(img.get_pixel(32, 14), bg, "the upper row of quads is in view");
+    let (code, out, err) =
+        run(&["render", &d("s.mray"), "-o", &d("a.png"), "--res", "32x24", "--animate", "4:orbit", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let lines: Vec<serde_json::Value> = out.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 5, "four frames and a summary");
+    assert!(lines[..4].iter().all(|l| l["top_rebuild_ms"].as_f64().is_some() && l["moved_instances"] == 3));
+    let (code, _, err) = run(&["render", &d("s.mray"), "-o", &d("a.png"), "--animate", "2:spin:ghost"]);
+    assert!(code != 0 && err.contains("no instance named `ghost`"), "{err}");
+}
+
+#[test]
+fn a_forest_shows_trillions_of_triangles_from_a_few_objects() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    let (code, _, err) = run(&["gen", "forest:1e12:2k", "-o", &d("f.pbrt")]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run(&["build", &d("f.pbrt"), "-o", &d("f.mray")]);
+    assert_eq!(code, 0, "{err}");
+    let (_, out, _) = run(&["info", &d("f.mray"), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert!(v["instances"]["instanced_triangles_f64"].as_f64().unwrap() >= 1e12);
+    assert!(v["triangles"].as_u64().unwrap() < 20_000, "a few trees and the ground");
+    let (code, _, err) = run(&["render", &d("f.mray"), "-o", &d("f.png"), "--res", "64x48", "--shader", "diffuse"]);
+    assert_eq!(code, 0, "{err}");
+}
+
+#[test]
+fn bad_scenes_are_one_line_with_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("bad.pbrt");
+    std::fs::write(&p, "WorldBegin\nAttributeEnd\n").unwrap();
+    let (code, _, err) = run(&["build", &p.to_string_lossy(), "-o", &dir.path().join("x.mray").to_string_lossy()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("bad.pbrt: line 2:1: unbalanced AttributeEnd"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}
