@@ -42,15 +42,18 @@ impl InstTree {
     /// hit), in this tree's arrays and `refs` (kept from build to build: fresh memory
     /// costs a page fault per 4 KiB, more than the build itself).
     pub(crate) fn rebuild(&mut self, boxes: &[Aabb], scratch: &mut Scratch) {
-        let Scratch { refs, sorted, keys, tmp } = scratch;
+        self.order.clear();
+        if boxes.len() > LBVH {
+            return self.rebuild_lbvh(boxes, scratch);
+        }
+        self.nodes.clear();
+        let Scratch { refs, sorted, .. } = scratch;
         refs.clear();
         refs.extend(
             (0..boxes.len() as u32)
                 .filter(|&i| !boxes[i as usize].is_empty())
                 .map(|i| Ref { c: boxes[i as usize].center().into(), i }),
         );
-        self.nodes.clear();
-        self.order.clear();
         if refs.is_empty() {
             return;
         }
@@ -58,16 +61,47 @@ impl InstTree {
         // is given exactly that many slots, so that the two sides fill disjoint ranges (the
         // unused slots are never reached).
         self.nodes.resize(2 * refs.len() - 1, InstNode { bounds: Aabb::EMPTY, count: 0, index: 0 });
-        if refs.len() > LBVH {
-            morton_order(refs, sorted, keys, tmp);
-            build_lbvh(boxes, sorted, keys, 0, &mut self.nodes, 0);
-            std::mem::swap(refs, sorted);
-        } else {
-            sorted.clear();
-            sorted.extend_from_slice(refs);
-            build_into(boxes, refs, sorted, 0, &mut self.nodes, 0);
-        }
+        sorted.clear();
+        sorted.extend_from_slice(refs);
+        build_into(boxes, refs, sorted, 0, &mut self.nodes, 0);
         self.order.extend(refs.iter().map(|r| r.i));
+    }
+
+    /// [`InstTree::rebuild`] of many boxes: the linear BVH over their Morton order (the
+    /// codes made on all threads, sorted with the boxes' indices, which are all the tree
+    /// needs).
+    fn rebuild_lbvh(&mut self, boxes: &[Aabb], scratch: &mut Scratch) {
+        use rayon::prelude::*;
+        let Scratch { keys, tmp, .. } = scratch;
+        let cb = boxes
+            .par_iter()
+            .with_min_len(1 << 15)
+            .filter(|b| !b.is_empty())
+            .map(|b| {
+                let c = b.center().into();
+                Aabb { min: c, max: c }
+            })
+            .reduce(|| Aabb::EMPTY, |a, b| a.union(&b));
+        let ext = cb.extent();
+        let scale: [f32; 3] = std::array::from_fn(|k| if ext[k] > 0.0 { 1023.0 / ext[k] } else { 0.0 });
+        // Empty boxes get the greatest key, are sorted last and cut off.
+        boxes
+            .par_iter()
+            .with_min_len(1 << 15)
+            .enumerate()
+            .map(|(i, b)| {
+                if b.is_empty() {
+                    return u64::MAX;
+                }
+                let c = b.center();
+                let q = |k: usize| (((c[k] - cb.min[k]) * scale[k]).max(0.0) as u32).min(1023);
+                ((spread(q(0)) | (spread(q(1)) << 1) | (spread(q(2)) << 2)) as u64) << 32 | i as u64
+            })
+            .collect_into_vec(keys);
+        radix_sort_high(keys, tmp);
+        self.nodes.resize(2 * keys.len() - 1, InstNode { bounds: Aabb::EMPTY, count: 0, index: 0 });
+        build_lbvh(boxes, keys, 0, &mut self.nodes, 0);
+        self.order.extend(keys.iter().map(|&k| k as u32));
     }
 
     /// Calls `visit(instance, t_near)` for each instance whose leaf box `ray` enters within
@@ -172,81 +206,62 @@ pub(crate) struct Scratch {
     tmp: Vec<u64>,
 }
 
-/// `refs` sorted along the Morton curve of their centres (10 bits an axis over their
-/// centres' box) into `sorted`, and `keys` holding, in the same order, each one's code in
-/// the high 32 bits (and its place in `refs` in the low ones).
-fn morton_order(refs: &[Ref], sorted: &mut Vec<Ref>, keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
-    let mut cb = Aabb::EMPTY;
-    for r in refs.iter() {
-        cb.grow_point(r.c);
+/// The low 10 bits of `v` spread to every third bit (a Morton code's one axis).
+fn spread(v: u32) -> u32 {
+    let mut x = v & 0x3ff;
+    x = (x | (x << 16)) & 0x030000ff;
+    x = (x | (x << 8)) & 0x0300f00f;
+    x = (x | (x << 4)) & 0x030c30c3;
+    (x | (x << 2)) & 0x09249249
+}
+
+/// Sorts `keys` by their high 32 bits (30-bit Morton codes): least significant digit first,
+/// 11 bits a pass, three passes, through `tmp`.
+fn radix_sort_high(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
+    if tmp.len() != keys.len() {
+        tmp.resize(keys.len(), 0);
     }
-    let ext = cb.extent();
-    let scale: [f32; 3] = std::array::from_fn(|k| if ext[k] > 0.0 { 1023.0 / ext[k] } else { 0.0 });
-    let spread = |v: u32| {
-        let mut x = v & 0x3ff;
-        x = (x | (x << 16)) & 0x030000ff;
-        x = (x | (x << 8)) & 0x0300f00f;
-        x = (x | (x << 4)) & 0x030c30c3;
-        (x | (x << 2)) & 0x09249249
-    };
-    let code = |r: &Ref| -> u64 {
-        let q = |k: usize| (((r.c[k] - cb.min[k]) * scale[k]).max(0.0) as u32).min(1023);
-        (spread(q(0)) | (spread(q(1)) << 1) | (spread(q(2)) << 2)) as u64
-    };
-    {
-        use rayon::prelude::*;
-        refs.par_iter()
-            .enumerate()
-            .with_min_len(1 << 15)
-            .map(|(i, r)| (code(r) << 32) | i as u64)
-            .collect_into_vec(keys);
-    }
-    tmp.clear();
-    tmp.resize(keys.len(), 0);
-    // Least significant digit first, 8 bits a pass (30-bit codes: four passes).
-    for shift in [32u32, 40, 48, 56] {
-        let mut count = [0usize; 257];
+    for shift in [32u32, 43, 54] {
+        let mut count = vec![0usize; 2049];
         for k in keys.iter() {
-            count[((k >> shift) & 0xff) as usize + 1] += 1;
+            count[((k >> shift) & 0x7ff) as usize + 1] += 1;
         }
-        for d in 0..256 {
+        for d in 0..2048 {
             count[d + 1] += count[d];
         }
         for &k in keys.iter() {
-            let d = ((k >> shift) & 0xff) as usize;
+            let d = ((k >> shift) & 0x7ff) as usize;
             tmp[count[d]] = k;
             count[d] += 1;
         }
         std::mem::swap(keys, tmp);
     }
-    sorted.clear();
-    sorted.extend(keys.iter().map(|&k| refs[(k & 0xffff_ffff) as usize]));
 }
 
-/// The linear BVH over `refs` sorted by `codes` (as [`morton_order`] leaves them) into
-/// `nodes[0]` and the slots after it (laid out as [`build_into`] does); returns its box.
-fn build_lbvh(boxes: &[Aabb], refs: &[Ref], codes: &[u64], refs_at: u32, nodes: &mut [InstNode], at: u32) -> Aabb {
-    let n = refs.len();
+/// The linear BVH over `keys` (Morton code high, box index low, sorted; the first being
+/// `at_order` of the tree's order) into `nodes[0]` and the slots after it (laid out as
+/// [`build_into`] does); returns its box.
+fn build_lbvh(boxes: &[Aabb], keys: &[u64], at_order: u32, nodes: &mut [InstNode], at: u32) -> Aabb {
+    let n = keys.len();
     if n <= LEAF {
-        let bounds = refs.iter().fold(Aabb::EMPTY, |b, r| b.union(&boxes[r.i as usize]));
-        nodes[0] = InstNode { bounds, count: n as u32, index: refs_at };
+        let bounds = keys.iter().fold(Aabb::EMPTY, |b, &k| b.union(&boxes[k as u32 as usize]));
+        nodes[0] = InstNode { bounds, count: n as u32, index: at_order };
         return bounds;
     }
-    let (first, last) = ((codes[0] >> 32) as u32, (codes[n - 1] >> 32) as u32);
+    let (first, last) = ((keys[0] >> 32) as u32, (keys[n - 1] >> 32) as u32);
     let mid = if first == last {
         n / 2
     } else {
         // The first code with the highest differing bit set.
         let bit = 31 - (first ^ last).leading_zeros();
-        codes.partition_point(|&c| (c >> 32) as u32 & (1 << bit) == 0).clamp(1, n - 1)
+        keys.partition_point(|&c| (c >> 32) as u32 & (1 << bit) == 0).clamp(1, n - 1)
     };
     let left_slots = 2 * mid - 1;
     let (_, rest) = nodes.split_at_mut(1);
     let (ln, rn) = rest.split_at_mut(left_slots);
-    let (lr, rr) = refs.split_at(mid);
-    let (lc, rc) = codes.split_at(mid);
-    let mut left = move || build_lbvh(boxes, lr, lc, refs_at, ln, at + 1);
-    let mut right = move || build_lbvh(boxes, rr, rc, refs_at + mid as u32, rn, at + 1 + left_slots as u32);
+    let (lk, rk) = keys.split_at(mid);
+    let mut left = move || build_lbvh(boxes, lk, at_order, ln, at + 1);
+    let mut right = move || build_lbvh(boxes, rk, at_order + mid as u32, rn, at + 1 + left_slots as u32);
     let (a, b) = if n > PARALLEL { rayon::join(left, right) } else { (left(), right()) };
     let bounds = a.union(&b);
     nodes[0] = InstNode { bounds, count: 0, index: at + 1 + left_slots as u32 };
