@@ -33,6 +33,9 @@ struct Inst {
     target: Target,
     /// A material override, or `u32::MAX`.
     material: u32,
+    /// Its scale: the cube root of the transform's determinant's size (what lengths in the
+    /// target become in the group, for the choice of a level of detail).
+    scale: f32,
 }
 
 /// The instance layer of a [`Tracer`]: a tracer per object, a tree per group.
@@ -78,6 +81,7 @@ impl<'s> Layer<'s> {
                 to_local: k.xform.inverse().unwrap_or(Affine::IDENTITY),
                 target: k.target,
                 material: k.material.unwrap_or(u32::MAX),
+                scale: scale_of(&k.xform),
             })
             .collect();
         let members = i.groups.iter().map(|g| (g.first, g.count)).collect();
@@ -122,7 +126,7 @@ impl<'s> Layer<'s> {
     pub(crate) fn set_transform(&mut self, k: usize, xf: Affine) -> bool {
         match (self.inst.get_mut(k), xf.inverse()) {
             (Some(i), Some(inv)) => {
-                (i.to_parent, i.to_local) = (xf, inv);
+                (i.to_parent, i.to_local, i.scale) = (xf, inv, scale_of(&xf));
                 true
             }
             _ => false,
@@ -144,15 +148,16 @@ impl<'s> Layer<'s> {
         let t_max = prior.map_or(ray.t_max, |h| h.t);
         let mut q = Query { best: prior, t_max, any, missing: None, lod, path: Vec::new(), skip_to };
         let world = Ray { t_max, ..*ray };
-        self.group(0, &world, &mut q);
+        self.group(0, &world, 1.0, &mut q);
         match q.missing {
             Some((path, inner)) => Traced::Pending(Box::new(Pending::inside(q.best, any, path, *inner))),
             None => Traced::Done(q.best),
         }
     }
 
-    /// Traces `ray` (in group `g`'s space) through `g`'s instances.
-    fn group(&self, g: u32, ray: &Ray, q: &mut Query<'_>) {
+    /// Traces `ray` (in group `g`'s space, a length of which is `scale` in the world)
+    /// through `g`'s instances.
+    fn group(&self, g: u32, ray: &Ray, scale: f32, q: &mut Query<'_>) {
         let Some(tree) = self.groups.get(g as usize) else { return };
         let first = self.members[g as usize].0;
         let t_max = std::cell::Cell::new(q.t_max);
@@ -160,9 +165,10 @@ impl<'s> Layer<'s> {
             let inst = &self.inst[(first + k) as usize];
             let local = Ray { t_max: q.t_max, ..inst.to_local.ray(ray) };
             q.path.push(first + k);
+            let scale = scale * inst.scale;
             match inst.target {
-                Target::Group(h) => self.group(h, &local, q),
-                Target::Object(o) => self.object(o, &local, q),
+                Target::Group(h) => self.group(h, &local, scale, q),
+                Target::Object(o) => self.object(o, &local, scale, q),
             }
             q.path.pop();
             t_max.set(q.t_max);
@@ -171,7 +177,7 @@ impl<'s> Layer<'s> {
     }
 
     /// Traces `ray` (in object `o`'s space) through the object.
-    fn object(&self, o: u32, ray: &Ray, q: &mut Query<'_>) {
+    fn object(&self, o: u32, ray: &Ray, scale: f32, q: &mut Query<'_>) {
         let obj = &self.objects[o as usize];
         if q.skip_to.is_none() && q.lod.is_none() && obj.pager.is_none() {
             // Unpaged, full detail: the objects' fastest way in (`Tracer::intersect`).
@@ -190,7 +196,12 @@ impl<'s> Layer<'s> {
             }
             from = q.skip_to.take().map(|(_, inner)| Box::new(inner));
         }
-        match obj.traverse_with(ray, q.any, from, 0, q.lod) {
+        let scaled = q.lod.filter(|_| scale != 1.0).map(|l| l.scaled(scale));
+        let traced = obj.traverse_with(ray, q.any, from, 0, scaled.as_ref().or(q.lod));
+        if let (Some(l), Some(s)) = (q.lod, &scaled) {
+            l.missed_in(s);
+        }
+        match traced {
             Traced::Done(Some(h)) if h.t < q.t_max || q.any => {
                 q.t_max = h.t;
                 q.best = Some(self.place(&q.path, h));
@@ -287,4 +298,10 @@ impl Tracer<'_> {
         }
         t.elapsed()
     }
+}
+
+/// What lengths become under `xf`: the cube root of its determinant's size (exact for a
+/// uniform scale, the mean for others).
+fn scale_of(xf: &Affine) -> f32 {
+    (xf.determinant().abs().cbrt() as f32).max(f32::MIN_POSITIVE)
 }

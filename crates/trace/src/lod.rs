@@ -86,6 +86,19 @@ pub(crate) struct LodRay {
 const FLOORS: usize = 8;
 
 impl LodRay {
+    /// This ray entering an object placed at scale `s` (an instance's): an object-space
+    /// error `e` is `e * s` in the world, so the error allowed is divided by `s`.
+    pub(crate) fn scaled(&self, s: f32) -> LodRay {
+        LodRay { pixels: self.pixels / s, ..self.clone() }
+    }
+
+    /// Takes over `other`'s mark of a level passed over (`other` made by [`LodRay::scaled`]).
+    pub(crate) fn missed_in(&self, other: &LodRay) {
+        if other.missed.get() {
+            self.missed.set(true);
+        }
+    }
+
     /// The lowest level allowed for full-detail part `part`.
     fn floor_of(&self, part: u32) -> u32 {
         self.floor[..self.floors].iter().filter(|f| f.0 == part).map(|f| f.1).max().unwrap_or(0)
