@@ -267,18 +267,10 @@ fn emit(
         }
         Ok(i)
     };
-    let ntris = match mode {
-        Mode::Triangles => count / 3,
-        _ => count.saturating_sub(2),
-    };
+    let ntris = triangle_count(mode, count);
     let mut attr = TriAttr { material, ..TriAttr::default() };
     for t in 0..ntris {
-        let c = match mode {
-            Mode::Triangles => [3 * t, 3 * t + 1, 3 * t + 2],
-            Mode::TriangleStrip if t % 2 == 0 => [t, t + 1, t + 2],
-            Mode::TriangleStrip => [t + 1, t, t + 2],
-            _ => [t + 1, t + 2, 0],
-        };
+        let c = triangle_corners(mode, t);
         let mut v = [index(c[0])?, index(c[1])?, index(c[2])?];
         if flip {
             v.swap(1, 2);
@@ -291,6 +283,25 @@ fn emit(
     summary.triangles += ntris as u64;
     summary.vertices += n as u64;
     Ok(())
+}
+
+/// Triangles in a primitive of `count` corners (indices, or vertices without them).
+pub(crate) fn triangle_count(mode: Mode, count: usize) -> usize {
+    match mode {
+        Mode::Triangles => count / 3,
+        _ => count.saturating_sub(2),
+    }
+}
+
+/// The corners (positions in the index list) of triangle `t` of a list, strip or fan,
+/// strips alternating so that every triangle keeps the winding.
+pub(crate) fn triangle_corners(mode: Mode, t: usize) -> [usize; 3] {
+    match mode {
+        Mode::Triangles => [3 * t, 3 * t + 1, 3 * t + 2],
+        Mode::TriangleStrip if t.is_multiple_of(2) => [t, t + 1, t + 2],
+        Mode::TriangleStrip => [t + 1, t, t + 2],
+        _ => [t + 1, t + 2, 0],
+    }
 }
 
 /// Converts a glTF material.

@@ -11,7 +11,7 @@ use ::gltf::mesh::Mode;
 use glam::Mat4;
 use megaray_base::{Affine, Vec3};
 
-use crate::gltf::{convert_material, guarded, open_doc, plan, read_primitive};
+use crate::gltf::{convert_material, guarded, open_doc, plan, read_primitive, triangle_corners, triangle_count};
 use crate::pbrt::{CameraDesc, ObjectDesc, PbrtScene, ShapeDesc, ShapeKind};
 use crate::ImportError;
 
@@ -53,15 +53,8 @@ pub fn read_scene(path: &Path) -> Result<PbrtScene, ImportError> {
             let count = d.indices.as_ref().map_or(n, Vec::len);
             let at = |k: usize| d.indices.as_ref().map_or(k as u32, |ix| ix[k]);
             let mut indices = Vec::new();
-            let tris = if mode == Mode::Triangles { count / 3 } else { count.saturating_sub(2) };
-            for t in 0..tris {
-                let c = match mode {
-                    Mode::Triangles => [3 * t, 3 * t + 1, 3 * t + 2],
-                    Mode::TriangleStrip if t % 2 == 0 => [t, t + 1, t + 2],
-                    Mode::TriangleStrip => [t + 1, t, t + 2],
-                    _ => [t + 1, t + 2, 0],
-                };
-                for k in c {
+            for t in 0..triangle_count(mode, count) {
+                for k in triangle_corners(mode, t) {
                     let i = at(k);
                     if i as usize >= n {
                         return Err(err(loc(), format!("index {i} out of range ({n} vertices)")));
