@@ -216,3 +216,47 @@ fn moved_instances_hit_what_their_moved_triangles_do() {
 fn _uses(c: &mut dyn RayCaster) -> &Scene {
     c.scene()
 }
+
+/// Levels of detail through an instance scaled 4x are chosen as for the same object built at
+/// that size: the same levels answer the same pixels (at an error where that is full detail,
+/// and at one where it is a coarser level; an error compared in the object's own units would
+/// take coarser levels than the world's).
+#[test]
+fn levels_of_detail_through_a_scaled_instance_are_chosen_in_world_units() {
+    let dir = tempfile::tempdir().unwrap();
+    let ball = vec![sphere([0.0; 3], 1.0, 80)];
+    let grow = Affine::scale(Vec3::splat(4.0));
+    let plan = InstancePlan {
+        groups: vec![Group { name: "scene".into(), first: 0, count: 1 }],
+        instances: vec![inst(Target::Object(0), grow)],
+    };
+    let (ipath, _) = build_instanced(dir.path(), "big", &ball, &plan, test_options());
+    let (fpath, _) = build_tris(dir.path(), "flat", expand(&ball, &plan), test_options());
+    let (is, fs) = (Scene::open(&ipath).unwrap(), Scene::open(&fpath).unwrap());
+    assert!(fs.header().lod_part_count > 0 && is.header().lod_part_count == fs.header().lod_part_count);
+    let b = fs.header().bounds;
+    let cam = megaray_base::Camera::framing(&b, Vec3::new(0.0, 0.2, 2.0), 96, 72);
+    let cone = megaray_trace::RayCone::camera(cam.pixel_angle());
+    let full = fs.full_part_count();
+    let mut from_lod = Vec::new();
+    for px in [1.0, 2.0] {
+        let (ti, tf) = (Tracer::new(&is).with_lod_error(px), Tracer::new(&fs).with_lod_error(px));
+        let (mut same, mut lod, mut shown) = (0, 0, 0);
+        for i in 0..96 * 72 {
+            let r = cam.ray((i % 96) as f32 + 0.5, (i / 96) as f32 + 0.5);
+            let (a, f) = (ti.trace_cone(&r, false, &cone), tf.trace_cone(&r, false, &cone));
+            if let Some(f) = f {
+                shown += 1;
+                lod += (f.part >= full) as usize;
+                same += a.is_some_and(|a| a.part == f.part && (a.t - f.t).abs() <= 1e-3 * f.t) as usize;
+            }
+        }
+        assert!(shown > 200, "{shown} pixels show the ball");
+        assert!(
+            same * 100 >= shown * 97,
+            "error {px}: {same} of {shown} pixels hit the same level at the same distance"
+        );
+        from_lod.push(lod * 2 > shown);
+    }
+    assert_eq!(from_lod, [false, true], "full detail at an error of 1 pixel, a coarser level at 2");
+}
