@@ -239,7 +239,9 @@ impl Server<'_, '_> {
 
     /// A new viewer's core, at the page's size.
     fn view(&self, w: u32, h: u32) -> Result<ViewCore<'_, '_>> {
-        Ok(ViewCore::new(self.tracer, self.pool, self.viewer.options(w, h)?))
+        let mut opts = self.viewer.options(w, h)?;
+        crate::view::scene_home(&mut opts, self.tracer.scene());
+        Ok(ViewCore::new(self.tracer, self.pool, opts))
     }
 }
 

@@ -163,6 +163,7 @@ pub fn view(a: ViewArgs, bars: &Bars) -> Result<()> {
     let tracer = Tracer::paged_or_new(&scene, pager.as_ref()).with_lod_error(a.viewer.lod_error);
     let pool = crate::cmd::pool(a.viewer.threads)?;
     let mut opts = a.viewer.options(a.res.0, a.res.1)?;
+    scene_home(&mut opts, &scene);
     let name = opened.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     if let Some(script) = &a.script {
         if !a.budgeted {
@@ -347,6 +348,15 @@ fn replay(
     std::fs::write(&jsonl, log).with_context(|| format!("{}: cannot write", jsonl.display()))?;
     eprintln!("{n} frames written to {}", out.display());
     Ok(())
+}
+
+/// Starts `opts`'s view at `scene`'s own camera (a pbrt or glTF scene's), with its field of
+/// view, where the scene has one.
+pub(crate) fn scene_home(opts: &mut ViewOptions, scene: &megaray_scene::Scene) {
+    if let Some(c) = crate::open::scene_camera(scene, opts.width.max(1), opts.height.max(1)) {
+        opts.home = Some(megaray_view::Pose::looking_at(c.eye, c.eye + c.fwd));
+        opts.fov = (2.0 * c.tan_half.atan()).to_degrees();
+    }
 }
 
 #[cfg(test)]

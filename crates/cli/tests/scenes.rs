@@ -48,6 +48,14 @@ fn a_pbrt_scene_builds_renders_from_its_camera_and_animates() {
     assert!(lines[..4].iter().all(|l| l["top_rebuild_ms"].as_f64().is_some() && l["moved_instances"] == 3));
     let (code, _, err) = run(&["render", &d("s.mray"), "-o", &d("a.png"), "--animate", "2:spin:ghost"]);
     assert!(code != 0 && err.contains("no instance named `ghost`"), "{err}");
+    // The viewer starts at the scene's camera too.
+    std::fs::write(d("script.txt"), "frames 1\n").unwrap();
+    let (code, _, err) = run(&["view", &d("s.mray"), "--script", &d("script.txt"), "--out", &d("v"), "--res", "32x24"]);
+    assert_eq!(code, 0, "{err}");
+    let log = std::fs::read_to_string(dir.path().join("v/frames.jsonl")).unwrap();
+    let first: serde_json::Value = serde_json::from_str(log.lines().next().unwrap()).unwrap();
+    let eye: Vec<f64> = first["eye"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    assert!((eye[0]).abs() < 1e-4 && (eye[1] - 3.0).abs() < 1e-4 && (eye[2] - 12.0).abs() < 1e-4, "{eye:?}");
 }
 
 #[test]

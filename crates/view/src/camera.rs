@@ -59,6 +59,11 @@ const TURN: f32 = 0.005;
 impl FlyCamera {
     /// The benchmark's default view of `bounds` (as `megaray render` frames it: from
     /// `c + (0, 0.3, 1.6) d`), moving a quarter of the diagonal a second.
+    /// The camera at `pose` over a scene of box `bounds` (its speed by the box's size).
+    pub fn at(pose: Pose, bounds: &Aabb, fov: f32) -> FlyCamera {
+        FlyCamera { pose, speed: 0.25 * bounds.diagonal().max(1e-6), fov }
+    }
+
     pub fn home(bounds: &Aabb, fov: f32) -> FlyCamera {
         let (c, d) = (bounds.center(), bounds.diagonal().max(1e-6));
         FlyCamera { pose: Pose::looking_at(c + megaray_base::DEFAULT_OFFSET * d, c), speed: 0.25 * d, fov }

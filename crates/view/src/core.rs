@@ -49,6 +49,9 @@ pub struct ViewOptions {
     /// then carry the albedo, normal and depth it needs). [`ViewCore::image`] stays the plain
     /// accumulated picture.
     pub denoise: bool,
+    /// Where the view starts (and R returns): the scene's own camera, if its source gave
+    /// one; `None`: the default framing of `megaray render`.
+    pub home: Option<Pose>,
 }
 
 /// Whether the still frame that brings the accumulation to `frames` frames is shown denoised:
@@ -72,6 +75,7 @@ impl ViewOptions {
             frame_budget: Some(Duration::from_millis(100)),
             max_frames: 1024,
             denoise: true,
+            home: None,
         }
     }
 }
@@ -142,7 +146,10 @@ impl<'t, 's> ViewCore<'t, 's> {
     /// rendering on `pool`.
     pub fn new(tracer: &'t Tracer<'s>, pool: &'t rayon::ThreadPool, opts: ViewOptions) -> ViewCore<'t, 's> {
         let bounds = tracer.scene().header().bounds;
-        let home = FlyCamera::home(&bounds, opts.fov);
+        let home = match opts.home {
+            Some(p) => FlyCamera::at(p, &bounds, opts.fov),
+            None => FlyCamera::home(&bounds, opts.fov),
+        };
         let (w, h) = (opts.width.max(1), opts.height.max(1));
         let mut v = ViewCore {
             tracer,
