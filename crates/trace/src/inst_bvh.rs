@@ -215,27 +215,60 @@ fn spread(v: u32) -> u32 {
     (x | (x << 2)) & 0x09249249
 }
 
-/// Sorts `keys` by their high 32 bits (30-bit Morton codes): least significant digit first,
-/// 11 bits a pass, three passes, through `tmp`.
+/// Sorts `keys` by their high 32 bits (30-bit Morton codes): one pass on the codes' top 10
+/// bits into 1024 buckets, then each bucket on its own, on all threads, by the other 20 bits
+/// (two 10-bit passes, least significant first), through `tmp`.
 fn radix_sort_high(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
+    use rayon::prelude::*;
     if tmp.len() != keys.len() {
         tmp.resize(keys.len(), 0);
     }
-    for shift in [32u32, 43, 54] {
-        let mut count = vec![0usize; 2049];
-        for k in keys.iter() {
-            count[((k >> shift) & 0x7ff) as usize + 1] += 1;
-        }
-        for d in 0..2048 {
-            count[d + 1] += count[d];
-        }
-        for &k in keys.iter() {
-            let d = ((k >> shift) & 0x7ff) as usize;
-            tmp[count[d]] = k;
-            count[d] += 1;
-        }
-        std::mem::swap(keys, tmp);
+    let digit = |k: u64, shift: u32| ((k >> shift) & 0x3ff) as usize;
+    let mut count = vec![0usize; 1025];
+    for &k in keys.iter() {
+        count[digit(k, 52) + 1] += 1;
     }
+    for d in 0..1024 {
+        count[d + 1] += count[d];
+    }
+    let starts = count.clone();
+    for &k in keys.iter() {
+        let d = digit(k, 52);
+        tmp[count[d]] = k;
+        count[d] += 1;
+    }
+    // The buckets as disjoint slices of both arrays.
+    let mut pairs = Vec::with_capacity(1024);
+    let (mut a, mut b): (&mut [u64], &mut [u64]) = (&mut tmp[..], &mut keys[..]);
+    for d in 0..1024 {
+        let len = starts[d + 1] - starts[d];
+        let (x, rest_a) = std::mem::take(&mut a).split_at_mut(len);
+        let (y, rest_b) = std::mem::take(&mut b).split_at_mut(len);
+        (a, b) = (rest_a, rest_b);
+        if len > 1 {
+            pairs.push((x, y));
+        }
+    }
+    pairs.par_iter_mut().with_min_len(8).for_each(|(bucket, spare)| {
+        for (from_bucket, shift) in [(true, 32u32), (false, 42)] {
+            let (src, dst): (&[u64], &mut [u64]) =
+                if from_bucket { (&bucket[..], &mut spare[..]) } else { (&spare[..], &mut bucket[..]) };
+            let mut c = [0usize; 1025];
+            for &k in src {
+                c[digit(k, shift) + 1] += 1;
+            }
+            for d in 0..1024 {
+                c[d + 1] += c[d];
+            }
+            for &k in src {
+                let d = digit(k, shift);
+                dst[c[d]] = k;
+                c[d] += 1;
+            }
+        }
+    });
+    // Sorted in `tmp` (each bucket went there and back).
+    std::mem::swap(keys, tmp);
 }
 
 /// The linear BVH over `keys` (Morton code high, box index low, sorted; the first being
@@ -414,6 +447,27 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    /// The radix sort orders by the codes (high 32 bits) and keeps equal codes in their
+    /// order (the low bits, indices, ascending as given).
+    #[test]
+    fn keys_sort_by_code_stably() {
+        let mut s = 3u32;
+        for n in [0usize, 1, 5, 1000, 200_000] {
+            let mut keys: Vec<u64> = (0..n as u64)
+                .map(|i| {
+                    s = megaray_base::hash32(s);
+                    // Few distinct codes in the small cases, all 30 bits in the large.
+                    let code = if n < 2000 { s % 7 } else { s & 0x3fff_ffff };
+                    ((code as u64) << 32) | i
+                })
+                .collect();
+            let mut want = keys.clone();
+            want.sort_by_key(|k| (k >> 32, k & 0xffff_ffff));
+            radix_sort_high(&mut keys, &mut Vec::new());
+            assert_eq!(keys, want, "n {n}");
         }
     }
 }
