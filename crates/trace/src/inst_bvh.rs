@@ -73,15 +73,21 @@ impl InstTree {
     fn rebuild_lbvh(&mut self, boxes: &[Aabb], scratch: &mut Scratch) {
         use rayon::prelude::*;
         let Scratch { keys, tmp, .. } = scratch;
-        let cb = boxes
-            .par_iter()
-            .with_min_len(1 << 15)
-            .filter(|b| !b.is_empty())
-            .map(|b| {
-                let c = b.center().into();
-                Aabb { min: c, max: c }
-            })
-            .reduce(|| Aabb::EMPTY, |a, b| a.union(&b));
+        // The codes quantize the centres over a box: the last build's box, where there was
+        // one (a frame's moves shift it little; a centre outside it is clamped to its edge,
+        // which costs the tree some quality, never a hit), else the centres' own.
+        let cb = match self.nodes.first() {
+            Some(root) if !root.bounds.is_empty() => root.bounds,
+            _ => boxes
+                .par_iter()
+                .with_min_len(1 << 15)
+                .filter(|b| !b.is_empty())
+                .map(|b| {
+                    let c = b.center().into();
+                    Aabb { min: c, max: c }
+                })
+                .reduce(|| Aabb::EMPTY, |a, b| a.union(&b)),
+        };
         let ext = cb.extent();
         let scale: [f32; 3] = std::array::from_fn(|k| if ext[k] > 0.0 { 1023.0 / ext[k] } else { 0.0 });
         // Empty boxes get the greatest key, are sorted last and cut off.
@@ -468,6 +474,52 @@ mod tests {
             want.sort_by_key(|k| (k >> 32, k & 0xffff_ffff));
             radix_sort_high(&mut keys, &mut Vec::new());
             assert_eq!(keys, want, "n {n}");
+        }
+    }
+
+    /// A linear BVH rebuilt after its boxes moved far out of the box it was built over
+    /// (the codes' range comes from the last build) still leads every ray to every box it
+    /// enters.
+    #[test]
+    fn rebuilt_after_a_move_visits_every_box_the_ray_enters() {
+        let mut s = 11u32;
+        let mut rnd = || {
+            s = megaray_base::hash32(s);
+            megaray_base::u01(s)
+        };
+        let n = LBVH + 5000;
+        let mut boxes: Vec<Aabb> = (0..n)
+            .map(|_| {
+                let c = Vec3::new(rnd(), rnd(), rnd()) * 100.0;
+                Aabb { min: (c - Vec3::splat(0.5)).into(), max: (c + Vec3::splat(0.5)).into() }
+            })
+            .collect();
+        let mut tree = InstTree::default();
+        let mut scratch = Scratch::default();
+        tree.rebuild(&boxes, &mut scratch);
+        // Half the boxes move 300 units away (far outside the first build's box).
+        for b in boxes.iter_mut().step_by(2) {
+            *b = Aabb { min: (b.lo() + Vec3::X * 300.0).into(), max: (b.hi() + Vec3::X * 300.0).into() };
+        }
+        tree.rebuild(&boxes, &mut scratch);
+        for _ in 0..200 {
+            let o = Vec3::new(rnd() * 400.0, rnd() * 100.0, rnd() * 100.0);
+            let d = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5);
+            let ray = Ray::new(o, d);
+            let mut seen = vec![false; n];
+            tree.walk(&ray, &|| f32::INFINITY, |i| {
+                seen[i as usize] = true;
+                true
+            });
+            for (i, b) in boxes.iter().enumerate() {
+                let (mut near, mut far) = (0.0f32, f32::INFINITY);
+                for k in 0..3 {
+                    let (a, c) = ((b.min[k] - o[k]) / d[k], (b.max[k] - o[k]) / d[k]);
+                    near = near.max(a.min(c));
+                    far = far.min(a.max(c));
+                }
+                assert!(near > far || seen[i], "box {i} entered but not visited");
+            }
         }
     }
 }
