@@ -105,6 +105,11 @@ impl InstTree {
             })
             .collect_into_vec(keys);
         radix_sort_high(keys, tmp);
+        keys.truncate(keys.partition_point(|&k| k != u64::MAX));
+        if keys.is_empty() {
+            self.nodes.clear();
+            return;
+        }
         self.nodes.resize(2 * keys.len() - 1, InstNode { bounds: Aabb::EMPTY, count: 0, index: 0 });
         build_lbvh(boxes, keys, 0, &mut self.nodes, 0);
         self.order.extend(keys.iter().map(|&k| k as u32));
@@ -497,11 +502,16 @@ mod tests {
         let mut tree = InstTree::default();
         let mut scratch = Scratch::default();
         tree.rebuild(&boxes, &mut scratch);
-        // Half the boxes move 300 units away (far outside the first build's box).
+        // Half the boxes move 300 units away (far outside the first build's box), and every
+        // tenth is emptied (an instance of an empty group: nothing to hit).
         for b in boxes.iter_mut().step_by(2) {
             *b = Aabb { min: (b.lo() + Vec3::X * 300.0).into(), max: (b.hi() + Vec3::X * 300.0).into() };
         }
+        for b in boxes.iter_mut().step_by(10) {
+            *b = Aabb::EMPTY;
+        }
         tree.rebuild(&boxes, &mut scratch);
+        assert_eq!(tree.order.len(), n - n.div_ceil(10), "empty boxes are left out");
         for _ in 0..200 {
             let o = Vec3::new(rnd() * 400.0, rnd() * 100.0, rnd() * 100.0);
             let d = Vec3::new(rnd() - 0.5, rnd() - 0.5, rnd() - 0.5);
@@ -518,7 +528,8 @@ mod tests {
                     near = near.max(a.min(c));
                     far = far.min(a.max(c));
                 }
-                assert!(near > far || seen[i], "box {i} entered but not visited");
+                assert!(b.is_empty() || near > far || seen[i], "box {i} entered but not visited");
+                assert!(!(b.is_empty() && seen[i]), "empty box {i} visited");
             }
         }
     }
