@@ -62,11 +62,7 @@ impl<'s> Layer<'s> {
                 let root = match o.part_count {
                     // A single part: start at its root (the object's tree would only test
                     // the part's box again).
-                    1 => {
-                        let p = &scene.parts()[o.first_part as usize];
-                        let node = scene.tiles()[p.root_tile as usize].node0() + p.root_node as u64;
-                        Entry { r: ChildRef::link(p.root_tile, node).0, arr: TOP, t: f32::NEG_INFINITY }
-                    }
+                    1 => Entry::part_root(scene, &scene.parts()[o.first_part as usize]),
                     _ => Entry { r: ChildRef::inner(top0 + o.root as u64).0, arr: TOP, t: f32::NEG_INFINITY },
                 };
                 base.object_tracer(root, o.bounds)

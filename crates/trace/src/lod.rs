@@ -167,7 +167,10 @@ impl<'s> Tracer<'s> {
     pub fn with_lod_error(self, pixels: f32) -> Tracer<'s> {
         let has_lod = self.scene.header().lod_part_count > 0;
         let mut t = if self.pager.is_none() && has_lod && pixels > 0.0 {
-            Tracer::with_kernels(self.scene, Kernels { tile_checks: true, ..self.choice }).stopping_at_every_tile()
+            // Kernels that check tiles, and no tile counted as checked (every crossing returns
+            // to the driver, `Tracer::enter`); the instance layer (its trees) kept.
+            let fresh = Tracer::bare(self.scene, Kernels { tile_checks: true, ..self.choice });
+            Tracer { checked: megaray_scene::CheckedTiles::NONE, layer: self.layer, bounds: self.bounds, ..fresh }
         } else {
             self
         };
@@ -175,13 +178,8 @@ impl<'s> Tracer<'s> {
         // above); a tracer that crosses tiles inline traces full detail.
         if has_lod && t.checked.is_none() {
             t.lod = lod_levels(t.scene).into();
-            let lod = t.lod.clone();
-            if let Some(l) = t.layer.as_mut() {
-                for o in &mut l.objects {
-                    o.lod = lod.clone();
-                }
-            }
         }
+        let t = t.rebase();
         t.set_lod_error(pixels);
         t
     }

@@ -37,6 +37,13 @@ const _: () = assert!(std::mem::size_of::<Entry>() == 16);
 impl Entry {
     /// All zero bits: what unused stack slots hold (cheapest to initialise).
     pub(crate) const ZERO: Entry = Entry { r: 0, arr: 0, t: 0.0 };
+
+    /// The root of part `p`, as the top-level tree links to it (in range: checked by
+    /// `Scene::open`): where a traversal of that part alone starts.
+    pub(crate) fn part_root(scene: &Scene, p: &megaray_scene::PartEntry) -> Entry {
+        let root = scene.tiles()[p.root_tile as usize].node0() + p.root_node as u64;
+        Entry { r: ChildRef::link(p.root_tile, root).0, arr: TOP, t: f32::NEG_INFINITY }
+    }
 }
 
 /// What a popped [`Entry`] turned out to be, its tile opened.
@@ -130,6 +137,11 @@ impl<'s> Tracer<'s> {
     /// A tracer of `scene` on the kernels `k` chooses: for tests and benchmarks that compare
     /// the paths. Panics if `k.isa` is not available on this machine.
     pub fn with_kernels(scene: &'s Scene, k: Kernels) -> Tracer<'s> {
+        Tracer::bare(scene, k).with_layer()
+    }
+
+    /// [`Tracer::with_kernels`] without the instance layer.
+    pub(crate) fn bare(scene: &'s Scene, k: Kernels) -> Tracer<'s> {
         assert!(Isa::available().contains(&k.isa), "{:?} is not available on this machine", k.isa);
         let top0 = scene.header().top_nodes_off / NODE_BYTES as u64;
         // Read once: the kernel table must be the one of the settings the tracer records
@@ -154,16 +166,10 @@ impl<'s> Tracer<'s> {
             lod: std::sync::Arc::new([]),
             layer: None,
             root: match scene.parts() {
-                // The part's root, as the top-level tree links to it (in range: checked by
-                // `Scene::open`).
-                [p] => {
-                    let root = scene.tiles()[p.root_tile as usize].node0() + p.root_node as u64;
-                    Entry { r: ChildRef::link(p.root_tile, root).0, arr: TOP, t: f32::NEG_INFINITY }
-                }
+                [p] => Entry::part_root(scene, p),
                 _ => Entry { r: ChildRef::inner(top0).0, arr: TOP, t: f32::NEG_INFINITY },
             },
         }
-        .with_layer()
     }
 
     /// This tracer with the instance layer of its scene, if the scene has instances.
@@ -201,12 +207,14 @@ impl<'s> Tracer<'s> {
         }
     }
 
-    /// This tracer with `f` applied to it and to its objects' tracers.
-    fn map_objects(mut self, f: impl Fn(Tracer<'s>) -> Tracer<'s>) -> Tracer<'s> {
-        if let Some(l) = self.layer.as_mut() {
-            l.objects = std::mem::take(&mut l.objects).into_iter().map(&f).collect();
+    /// This tracer with its objects' tracers made again from its settings (after a change
+    /// of kernels, pager, tile checks or levels of detail).
+    pub(crate) fn rebase(mut self) -> Tracer<'s> {
+        if let Some(mut l) = self.layer.take() {
+            l.objects = l.objects.iter().map(|o| self.object_tracer(o.root, o.bounds)).collect();
+            self.layer = Some(l);
         }
-        f(self)
+        self
     }
 
     /// The kernels this tracer was asked to run ([`Tracer::with_kernels`]).
@@ -243,13 +251,9 @@ impl<'s> Tracer<'s> {
 
     /// This tracer reading through `pager` ([`Tracer::paged`]).
     fn with_pager(self, pager: &'s Pager) -> Tracer<'s> {
-        self.map_objects(|t| Tracer { pager: Some(pager), ..t.stopping_at_every_tile() })
-    }
-
-    /// This tracer with no tile counted as checked: every crossing into a tile returns to
-    /// the driver ([`Tracer::enter`]).
-    pub(crate) fn stopping_at_every_tile(self) -> Tracer<'s> {
-        self.map_objects(|t| Tracer { checked: CheckedTiles::NONE, ..t })
+        // No tile counted as checked: every crossing into a tile returns to the driver
+        // ([`Tracer::enter`]), which asks the pager.
+        Tracer { pager: Some(pager), checked: CheckedTiles::NONE, ..self }.rebase()
     }
 
     /// The pager, for a paged tracer.
