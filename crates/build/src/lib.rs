@@ -231,7 +231,7 @@ pub fn build_objects(
     for m in std::mem::take(&mut scene.materials) {
         megaray_import::TriangleSink::material(&mut sink, m);
     }
-    let names: Vec<String> = scene.objects.iter().map(|o| o.name.clone()).collect();
+    let mut names: Vec<String> = scene.objects.iter().map(|o| o.name.clone()).collect();
     let mut input_bytes = 0;
     let mut inputs = 0;
     let mut roots = Vec::with_capacity(scene.objects.len());
@@ -293,11 +293,14 @@ pub fn build_objects(
             continue;
         }
         kept.push(Some(objects.len() as u32));
-        let (tris, bounds) = (root.count, root.bounds);
+        let (tri_count, bounds) = (root.count, root.bounds);
         let mut ps = pool.install(|| split::split(root, limit, opts, &io, progress))?;
         // Parts in a spatially coherent order (the order the splits produced them).
         ps.sort_by_key(|p| p.path.clone());
-        objects.push((k, parts.len() as u32, ps.len() as u32, bounds, tris));
+        // Its tree (`root`, `node_count`) is placed below.
+        let (first_part, part_count) = (parts.len() as u32, ps.len() as u32);
+        let name = std::mem::take(&mut names[k]);
+        objects.push(megaray_scene::Object { name, bounds, first_part, part_count, root: 0, node_count: 0, tri_count });
         parts.extend(ps);
     }
     progress.finish();
@@ -308,21 +311,23 @@ pub fn build_objects(
     let t2 = Instant::now();
     let mut top_nodes = Vec::new();
     let mut top_depth = 0;
-    let mut trees = Vec::with_capacity(objects.len());
-    for &(_, first, count, _, _) in &objects {
-        let boxes: Vec<Aabb> = parts[first as usize..(first + count) as usize].iter().map(|p| p.bounds).collect();
+    for o in &mut objects {
+        let (first, end) = (o.first_part as usize, (o.first_part + o.part_count) as usize);
+        let boxes: Vec<Aabb> = parts[first..end].iter().map(|p| p.bounds).collect();
         let (nodes, depth) = top_level(&boxes);
-        trees.push((top_nodes.len() as u32, nodes.len() as u32));
-        top_nodes.extend(objects::placed(nodes, top_nodes.len() as u32, first));
+        (o.root, o.node_count) = (top_nodes.len() as u32, nodes.len() as u32);
+        top_nodes.extend(objects::placed(nodes, o.root, o.first_part));
         top_depth = top_depth.max(depth);
     }
+    let object_count = objects.len() as u32;
+    let plain_bounds = objects.iter().fold(Aabb::EMPTY, |b, o| b.union(&o.bounds));
     let instancing = match scene.instancing.take() {
         None => None,
-        Some(plan) => Some(objects::instancing(plan, &objects, &trees, &kept, &scene_names(&objects, &names))?),
+        Some(plan) => Some(objects::instancing(plan, objects, &kept)?),
     };
     let bounds = match &instancing {
         Some(i) => i.group_bounds()[0],
-        None => objects.iter().fold(Aabb::EMPTY, |b, o| b.union(&o.3)),
+        None => plain_bounds,
     };
     let lod_capacity = opts.lod.map_or(0, |l| l.max_levels as u32) * parts.len() as u32;
     let mut writer =
@@ -374,7 +379,7 @@ pub fn build_objects(
         triangles,
         degenerate_dropped: dropped,
         parts: parts.len() as u32,
-        objects: objects.len() as u32,
+        objects: object_count,
         instances: instancing.as_ref().map_or(0, |i| i.instances.len() as u64),
         instanced_triangles: instancing.as_ref().map_or(triangles as u128, |i| i.instanced_triangles()),
         lod_parts: lod_count.load(Ordering::Relaxed),
@@ -392,11 +397,6 @@ pub fn build_objects(
         parts_s,
         total_s: t0.elapsed().as_secs_f64(),
     })
-}
-
-/// Each object's name, in the order objects were kept.
-fn scene_names(objects: &[(usize, u32, u32, Aabb, u64)], names: &[String]) -> Vec<String> {
-    objects.iter().map(|o| names.get(o.0).cloned().unwrap_or_default()).collect()
 }
 
 /// Imports one model file into the build's sink; returns the bytes read.

@@ -3,7 +3,6 @@
 
 use std::path::PathBuf;
 
-use megaray_base::Aabb;
 use megaray_import::{ImportError, Material, TriangleSink};
 use megaray_scene::format::Node8;
 use megaray_scene::{BlobChild, BlobRef, Group, Instance, Instancing, Object, Target};
@@ -57,17 +56,21 @@ pub enum ObjectSource<'a> {
 /// each named object a group (its shapes' object and the objects placed in it), numbered
 /// from the last defined, so that groups name only later groups; and the scene's camera
 /// and lights as the scene file's settings.
-pub fn pbrt_input<'a>(p: &megaray_import::pbrt::PbrtScene) -> SceneInput<'a> {
+pub fn pbrt_input<'a>(mut p: megaray_import::pbrt::PbrtScene) -> SceneInput<'a> {
     use megaray_base::Affine;
+    let settings = settings_json(&p);
     let n = p.objects.len();
     // pbrt object k's group: 0 for the world, else counted down from the last defined.
     let group_of = |k: usize| if k == 0 { 0 } else { (n - k) as u32 };
     let mut objects = Vec::new();
     let mut mesh_of = vec![None; n];
-    for (k, o) in p.objects.iter().enumerate() {
+    for (k, o) in p.objects.iter_mut().enumerate() {
         if !o.shapes.is_empty() {
             mesh_of[k] = Some(objects.len() as u32);
-            objects.push(ObjectInput { name: o.name.clone(), source: ObjectSource::Pbrt(o.clone()) });
+            // The shapes move to the build (a scene's inline meshes are not held twice).
+            let shapes = std::mem::take(&mut o.shapes);
+            let desc = megaray_import::pbrt::ObjectDesc { name: o.name.clone(), shapes, instances: Vec::new() };
+            objects.push(ObjectInput { name: o.name.clone(), source: ObjectSource::Pbrt(desc) });
         }
     }
     let mut by_group: Vec<usize> = (0..n).collect();
@@ -95,27 +98,27 @@ pub fn pbrt_input<'a>(p: &megaray_import::pbrt::PbrtScene) -> SceneInput<'a> {
         }
         plan.groups.push(Group { name: o.name.clone(), first, count: plan.instances.len() as u32 - first });
     }
-    SceneInput { objects, instancing: Some(plan), materials: p.materials.clone(), settings: settings_json(p) }
+    SceneInput { objects, instancing: Some(plan), materials: p.materials, settings }
 }
 
 /// A pbrt scene's camera and lights as the scene file's settings (JSON).
 fn settings_json(p: &megaray_import::pbrt::PbrtScene) -> String {
-    let v = |v: megaray_base::Vec3| format!("[{},{},{}]", v.x, v.y, v.z);
-    let mut parts = Vec::new();
+    use serde_json::{json, Map, Value};
+    let v = |v: megaray_base::Vec3| json!([v.x, v.y, v.z]);
+    let mut m = Map::new();
     if let Some(c) = &p.camera {
-        parts.push(format!(r#""camera":{{"eye":{},"at":{},"up":{},"fov":{}}}"#, v(c.eye), v(c.at), v(c.up), c.fov));
+        m.insert("camera".into(), json!({"eye": v(c.eye), "at": v(c.at), "up": v(c.up), "fov": c.fov}));
     }
-    if let Some(r) = p.resolution {
-        parts.push(format!(r#""resolution":[{},{}]"#, r.0, r.1));
+    if let Some((w, h)) = p.resolution {
+        m.insert("resolution".into(), json!([w, h]));
     }
     if let Some((path, scale)) = &p.environment {
-        let path = path.to_string_lossy().replace('\\', "\\\\").replace('"', "\\\"");
-        parts.push(format!(r#""environment":{{"file":"{path}","scale":{scale}}}"#));
+        m.insert("environment".into(), json!({"file": path.to_string_lossy(), "scale": scale}));
     }
     if let Some((dir, l)) = &p.sun {
-        parts.push(format!(r#""sun":{{"dir":{},"radiance":[{},{},{}]}}"#, v(*dir), l[0], l[1], l[2]));
+        m.insert("sun".into(), json!({"dir": v(*dir), "radiance": l}));
     }
-    format!("{{{}}}", parts.join(","))
+    Value::Object(m).to_string()
 }
 
 /// Groups and instances as a scene file describes them: targets index the input's objects.
@@ -140,33 +143,14 @@ pub(crate) fn placed(nodes: Vec<Node8>, node_base: u32, part_base: u32) -> impl 
     })
 }
 
-/// The scene file's instance section: the built objects (`(input index, first part, part
-/// count, bounds, triangles)`), their trees (`(root, nodes)`), and the plan with its
-/// instances of objects that were empty dropped (`kept`: each input object's new index).
+/// The scene file's instance section: the built objects, and the plan with its instances
+/// of objects that were empty dropped (`kept`: each input object's index among `objects`).
 pub(crate) fn instancing(
     plan: InstancePlan,
-    objects: &[(usize, u32, u32, Aabb, u64)],
-    trees: &[(u32, u32)],
+    objects: Vec<Object>,
     kept: &[Option<u32>],
-    names: &[String],
 ) -> Result<Instancing, BuildError> {
-    let mut out = Instancing {
-        objects: objects
-            .iter()
-            .zip(trees)
-            .zip(names)
-            .map(|((o, t), name)| Object {
-                name: name.clone(),
-                bounds: o.3,
-                first_part: o.1,
-                part_count: o.2,
-                root: t.0,
-                node_count: t.1,
-                tri_count: o.4,
-            })
-            .collect(),
-        ..Instancing::default()
-    };
+    let mut out = Instancing { objects, ..Instancing::default() };
     if plan.groups.is_empty() {
         return Err(BuildError::Invalid("an instanced scene needs a root group".into()));
     }

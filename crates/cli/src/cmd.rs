@@ -219,7 +219,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
     let generated = GeneratedInputs::of(&a.inputs, &a.out, bars)?;
     let pbrt = crate::open::pbrt_scene(&a.inputs, bars)?;
     let built = match pbrt {
-        Some(p) => megaray_build::build_objects(megaray_build::pbrt_input(&p), &a.out, &opts, bars),
+        Some(p) => megaray_build::build_objects(megaray_build::pbrt_input(p), &a.out, &opts, bars),
         None => build_scene(&generated.inputs, &a.out, &opts, bars),
     };
     let s = built.map_err(|e| {
