@@ -61,14 +61,6 @@ impl Lexer {
         &self.file
     }
 
-    /// Where the next token starts (or the end of the file).
-    pub(crate) fn loc(&mut self) -> Result<Loc, ImportError> {
-        Ok(match self.peek()? {
-            Some((_, l)) => l.clone(),
-            None => self.here(),
-        })
-    }
-
     fn here(&self) -> Loc {
         Loc { file: self.file.clone(), line: self.line, col: self.col }
     }

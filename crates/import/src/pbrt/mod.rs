@@ -273,7 +273,7 @@ impl Parser {
             }
             "MakeNamedMaterial" => {
                 let name = string(lx, loc)?;
-                let params = params(lx, loc)?;
+                let params = params(lx)?;
                 let kind = params.string("type").unwrap_or("diffuse").to_string();
                 let id = self.material(name.clone(), &kind, &params);
                 self.named_materials.insert(name, id);
@@ -472,14 +472,15 @@ fn string(lx: &mut Lexer, loc: &Loc) -> Result<String, ImportError> {
 /// A statement's type name and its parameter list.
 fn typed(lx: &mut Lexer, loc: &Loc) -> Result<(String, Params), ImportError> {
     let kind = string(lx, loc)?;
-    Ok((kind, params(lx, loc)?))
+    Ok((kind, params(lx)?))
 }
 
 #[derive(Clone, Debug)]
 enum Value {
     Nums(Vec<f64>),
     Strs(Vec<String>),
-    Bools(Vec<bool>),
+    /// Booleans: read (`"bool remaproughness" false`) but nothing megaray draws uses one.
+    Bools,
 }
 
 /// A parameter list: `"type name" value`, by name.
@@ -496,14 +497,15 @@ impl Params {
             _ => None,
         }
     }
-    pub(crate) fn ints(&self, name: &str) -> Option<&[f64]> {
+    /// The numbers of `name` as given (indices stay exact).
+    pub(crate) fn values(&self, name: &str) -> Option<&[f64]> {
         match self.get(name) {
             Some((_, _, Value::Nums(v))) => Some(v),
             _ => None,
         }
     }
     fn num(&self, name: &str) -> Option<f64> {
-        self.ints(name).and_then(|v| v.first().copied())
+        self.values(name).and_then(|v| v.first().copied())
     }
     pub(crate) fn string(&self, name: &str) -> Option<&str> {
         match self.get(name) {
@@ -519,30 +521,14 @@ impl Params {
     }
     fn rgb(&self, name: &str) -> Option<[f32; 3]> {
         match self.get(name) {
-            Some((t, _, Value::Nums(v))) if t == "rgb" && v.len() == 3 => Some(v.map_to3()),
+            Some((t, _, Value::Nums(v))) if t == "rgb" && v.len() == 3 => Some([v[0] as f32, v[1] as f32, v[2] as f32]),
             Some((t, _, Value::Nums(v))) if (t == "float" || t == "spectrum") && v.len() == 1 => Some([v[0] as f32; 3]),
             _ => None,
         }
     }
-    #[allow(dead_code)]
-    fn flag(&self, name: &str) -> Option<bool> {
-        match self.get(name) {
-            Some((_, _, Value::Bools(v))) => v.first().copied(),
-            _ => None,
-        }
-    }
 }
 
-trait To3 {
-    fn map_to3(&self) -> [f32; 3];
-}
-impl To3 for Vec<f64> {
-    fn map_to3(&self) -> [f32; 3] {
-        [self[0] as f32, self[1] as f32, self[2] as f32]
-    }
-}
-
-fn params(lx: &mut Lexer, loc: &Loc) -> Result<Params, ImportError> {
+fn params(lx: &mut Lexer) -> Result<Params, ImportError> {
     let mut out = Params::default();
     while let Some((Tok::Str(_), _)) = lx.peek()? {
         let Some((Tok::Str(decl), at)) = lx.next()? else { unreachable!("peeked a string") };
@@ -553,17 +539,15 @@ fn params(lx: &mut Lexer, loc: &Loc) -> Result<Params, ImportError> {
         let v = value(lx, &at)?;
         out.0.push((ty.to_string(), name.to_string(), v));
     }
-    let _ = loc;
     Ok(out)
 }
 
 fn skip_params(lx: &mut Lexer) -> Result<(), ImportError> {
-    let loc = lx.loc()?;
     if let Some((Tok::Str(_), _)) = lx.peek()? {
         // A type name (`Sampler "sobol"`).
         lx.next()?;
     }
-    params(lx, &loc).map(|_| ())
+    params(lx).map(|_| ())
 }
 
 /// One value, bare or a bracketed list (numbers, strings or bools).
@@ -572,7 +556,7 @@ fn value(lx: &mut Lexer, loc: &Loc) -> Result<Value, ImportError> {
         Ok(match t {
             Tok::Num(v) => Value::Nums(vec![v]),
             Tok::Str(s) => Value::Strs(vec![s]),
-            Tok::Ident(w) if w == "true" || w == "false" => Value::Bools(vec![w == "true"]),
+            Tok::Ident(w) if w == "true" || w == "false" => Value::Bools,
             t => return Err(l.err(format!("expected a value, found {t:?}"))),
         })
     };
@@ -581,24 +565,24 @@ fn value(lx: &mut Lexer, loc: &Loc) -> Result<Value, ImportError> {
         Some((t, l)) => return one(t, &l),
         None => return Err(loc.err("the file ends where a value was expected")),
     }
-    let (mut nums, mut strs, mut bools) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut nums, mut strs, mut bools) = (Vec::new(), Vec::new(), 0usize);
     loop {
         match lx.next()? {
             Some((Tok::Close, _)) => break,
             Some((Tok::Num(v), _)) => nums.push(v),
             Some((Tok::Str(s), _)) => strs.push(s),
-            Some((Tok::Ident(w), _)) if w == "true" || w == "false" => bools.push(w == "true"),
+            Some((Tok::Ident(w), _)) if w == "true" || w == "false" => bools += 1,
             Some((t, l)) => return Err(l.err(format!("unexpected {t:?} in a list"))),
             None => return Err(loc.err("unterminated list (no ']')")),
         }
-        if nums.len() + strs.len() + bools.len() > MAX_VALUES {
+        if nums.len() + strs.len() + bools > MAX_VALUES {
             return Err(loc.err(format!("a list of more than {MAX_VALUES} values")));
         }
     }
     Ok(match (nums.is_empty(), strs.is_empty()) {
         (false, true) => Value::Nums(nums),
         (true, false) => Value::Strs(strs),
-        (true, true) if !bools.is_empty() => Value::Bools(bools),
+        (true, true) if bools > 0 => Value::Bools,
         (true, true) => Value::Nums(Vec::new()),
         _ => return Err(loc.err("a list of numbers and strings mixed")),
     })

@@ -20,7 +20,7 @@ pub(crate) fn shape(kind: &str, p: &Params, file: &Path, loc: &Loc) -> Result<Op
             }
             let pts: Vec<[f32; 3]> = pts.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
             let per = if kind == "trianglemesh" { 3 } else { 4 };
-            let idx: Vec<f64> = match p.ints("indices") {
+            let idx: Vec<f64> = match p.values("indices") {
                 Some(i) => i.to_vec(),
                 None if pts.len() == per => (0..per).map(|i| i as f64).collect(),
                 None => return Err(loc.err(format!("{kind} without \"integer indices\""))),
