@@ -98,7 +98,10 @@ fn sanitize(name: &str) -> String {
 /// The scene among `inputs` whose structure the build keeps (objects and instances), parsed,
 /// what it skipped noted one line per kind: a pbrt-v4 scene (which must be the only input),
 /// or a glTF file given alone (several inputs are merged, flattened, as other models).
-pub(crate) fn pbrt_scene(inputs: &[PathBuf], bars: &dyn Progress) -> Result<Option<megaray_import::pbrt::PbrtScene>> {
+pub(crate) fn structured_scene(
+    inputs: &[PathBuf],
+    bars: &dyn Progress,
+) -> Result<Option<megaray_import::pbrt::PbrtScene>> {
     let name = |p: &PathBuf| p.to_string_lossy().to_ascii_lowercase();
     let is_pbrt = |p: &PathBuf| name(p).ends_with(".pbrt") || name(p).ends_with(".pbrt.gz");
     let is_gltf = |p: &PathBuf| name(p).ends_with(".gltf") || name(p).ends_with(".glb");
@@ -123,37 +126,35 @@ fn note(p: &Path, scene: &megaray_import::pbrt::PbrtScene, bars: &dyn Progress) 
     }
 }
 
+/// The scene file's settings (its source's camera and lights), parsed.
+fn settings(scene: &megaray_scene::Scene) -> Option<serde_json::Value> {
+    serde_json::from_str(scene.settings()?).ok()
+}
+
+/// A `[x, y, z]` of the settings.
+fn vec3(v: &serde_json::Value) -> Option<megaray_base::Vec3> {
+    let c = |i: usize| v.get(i).and_then(|x| x.as_f64()).map(|x| x as f32);
+    Some(megaray_base::Vec3::new(c(0)?, c(1)?, c(2)?))
+}
+
 /// The camera the scene file's source gave (a pbrt scene's), at `w` x `h`; its field of
 /// view (pbrt's, of the shorter side) made vertical.
 pub(crate) fn scene_camera(scene: &megaray_scene::Scene, w: u32, h: u32) -> Option<megaray_base::Camera> {
-    let v: serde_json::Value = serde_json::from_str(scene.settings()?).ok()?;
+    let v = settings(scene)?;
     let c = v.get("camera")?;
-    let vec = |k: &str| -> Option<megaray_base::Vec3> {
-        let a = c.get(k)?.as_array()?;
-        Some(megaray_base::Vec3::new(
-            a.first()?.as_f64()? as f32,
-            a.get(1)?.as_f64()? as f32,
-            a.get(2)?.as_f64()? as f32,
-        ))
-    };
     let fov = c.get("fov")?.as_f64()? as f32;
     let vfov =
         if w < h { 2.0 * ((fov.to_radians() / 2.0).tan() * h as f32 / w as f32).atan().to_degrees() } else { fov };
-    Some(megaray_base::Camera::look_at(vec("eye")?, vec("at")?, vec("up")?, vfov, w, h))
+    Some(megaray_base::Camera::look_at(vec3(c.get("eye")?)?, vec3(c.get("at")?)?, vec3(c.get("up")?)?, vfov, w, h))
 }
 
 /// The environment map (file, scale) and the sun's direction the scene's source gave.
 pub(crate) fn scene_lights(scene: &megaray_scene::Scene) -> (Option<(PathBuf, f32)>, Option<megaray_base::Vec3>) {
-    let Some(v) = scene.settings().and_then(|s| serde_json::from_str::<serde_json::Value>(s).ok()) else {
-        return (None, None);
-    };
+    let Some(v) = settings(scene) else { return (None, None) };
     let env = v.get("environment").and_then(|e| {
         let file = PathBuf::from(e.get("file")?.as_str()?);
         Some((file, e.get("scale").and_then(|s| s.as_f64()).unwrap_or(1.0) as f32))
     });
-    let sun = v.get("sun").and_then(|s| s.get("dir")).and_then(|d| d.as_array()).and_then(|a| {
-        let c = |i: usize| a.get(i).and_then(|x| x.as_f64()).map(|x| x as f32);
-        Some(megaray_base::Vec3::new(c(0)?, c(1)?, c(2)?)).filter(|d| d.length() > 0.0)
-    });
+    let sun = v.get("sun").and_then(|s| vec3(s.get("dir")?)).filter(|d| d.length() > 0.0);
     (env, sun)
 }
