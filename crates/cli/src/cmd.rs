@@ -217,8 +217,8 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
     let cancel = opts.cancel.clone();
     let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed));
     let generated = GeneratedInputs::of(&a.inputs, &a.out, bars)?;
-    let pbrt = crate::open::structured_scene(&a.inputs, bars)?;
-    let built = match pbrt {
+    let structured = crate::open::structured_scene(&a.inputs, bars)?;
+    let built = match structured {
         Some(p) => megaray_build::build_objects(megaray_build::pbrt_input(p), &a.out, &opts, bars),
         None => build_scene(&generated.inputs, &a.out, &opts, bars),
     };
