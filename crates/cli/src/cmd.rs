@@ -56,12 +56,12 @@ pub(crate) fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 // ---------------------------------------------------------------------------------------
 #[derive(Args)]
 pub struct GenArgs {
-    /// What to generate: grid:N, sphereflake:L[:S], plant:T or sky:... (see `megaray gen --help`).
+    /// What to generate: grid:N, sphereflake:L[:S], plant:T, forest:T[:U] or sky:... (see `megaray gen --help`).
     spec: String,
     /// Output file: binary little-endian PLY for models, .hdr (or .exr) for sky.
     #[arg(short, long, value_name = "FILE")]
     out: PathBuf,
-    /// Seed for plant:T (the same seed gives the same plant).
+    /// Seed for plant:T and forest:T (the same seed gives the same model).
     #[arg(long, default_value_t = 1)]
     seed: u64,
 }
@@ -122,7 +122,8 @@ pub enum QualityArg {
 pub struct BuildArgs {
     /// Model files: .ply, .obj, .stl, .gltf, .glb (merged into one scene), or gen SPECs
     /// (e.g. grid:1000; see `megaray gen --help`), generated first into a temporary PLY beside
-    /// the output.
+    /// the output; or one scene: a .pbrt file, or a .gltf/.glb alone (objects and instances
+    /// kept).
     #[arg(required = true, value_name = "INPUT")]
     inputs: Vec<PathBuf>,
     /// The scene file to write.
@@ -292,7 +293,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
 // ---------------------------------------------------------------------------------------
 #[derive(Args)]
 pub struct RenderArgs {
-    /// The scene file, or a model file (PLY, OBJ, STL, glTF/GLB), built into a scene first
+    /// The scene file, or a model file or pbrt-v4 scene (PLY, OBJ, STL, glTF/GLB, .pbrt), built into a scene first
     /// (cached under ~/.cache/megaray/models, keyed by its content).
     scene: PathBuf,
     /// Output image: .png (tone-mapped sRGB) or .exr (linear float, with --aov layers).

@@ -39,6 +39,10 @@ enum Command {
     ///   grid:N              height field, 2*N*N triangles (as the Embree peer harness)
     ///   sphereflake:L[:S]   Haines sphere flake, L levels, S bands (as the peer harness)
     ///   plant:T             a CAD-like power plant of about T triangles (k/M/G suffixes)
+    ///   forest:T[:U]        the seed's forest as a pbrt-v4 scene (-o forest.pbrt) with its
+    ///                       4 trees (about U triangles each, default 100k) as PLY files
+    ///                       beside it: groves instanced level upon level until at least T
+    ///                       triangles are shown (1e14, 500G, 2T); build it with megaray build
     ///   sky[:KEY=V,...]     a procedural sky and sun as a lat-long .hdr (or .exr) environment
     ///                       map, for --env. Keys (defaults):
     ///                         sun_elev   sun elevation, degrees (35)
@@ -50,6 +54,7 @@ enum Command {
     ///
     /// Examples:
     ///   megaray gen plant:10M -o plant.ply
+    ///   megaray gen forest:1e14 -o forest.pbrt
     ///   megaray gen sky:sun_elev=20,sun_azim=60,turbidity=4 -o sky.hdr
     #[command(verbatim_doc_comment)]
     Gen(cmd::GenArgs),
@@ -58,7 +63,13 @@ enum Command {
     /// Inputs (merged into one scene): PLY (ascii/binary), OBJ (+ .mtl), STL (ascii/binary),
     /// glTF/GLB. A gen SPEC (e.g. grid:1000) is accepted as an input too.
     ///
+    /// Scenes keep their structure (objects and instances, never flattened; their camera and
+    /// lights become the scene's defaults): a pbrt-v4 scene (.pbrt, .pbrt.gz), or a glTF file
+    /// given alone. See docs/INPUT.md for what is read and what is skipped.
+    ///
     /// Example: megaray build plant.ply -o plant.mray --build-mem 1G
+    ///
+    /// Example: megaray build scene.pbrt -o scene.mray
     Build(cmd::BuildArgs),
     /// Render a scene file to a PNG or OpenEXR image, progressively
     ///

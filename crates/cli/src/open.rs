@@ -38,7 +38,10 @@ pub fn scene_for(path: Option<&Path>, o: &OpenArgs, bars: &dyn Progress) -> Resu
     };
     match Scene::open(path) {
         Ok(_) => return Ok(Opened { path: path.to_path_buf(), _tmp: None }),
-        Err(e) if e.kind != SceneErrorKind::NotAScene || megaray_import::Format::detect(path).is_err() => {
+        Err(e)
+            if e.kind != SceneErrorKind::NotAScene
+                || (megaray_import::Format::detect(path).is_err() && !is_pbrt(path)) =>
+        {
             return Err(e.into())
         }
         Err(_) => {}
@@ -64,8 +67,9 @@ pub fn scene_for(path: Option<&Path>, o: &OpenArgs, bars: &dyn Progress) -> Resu
 }
 
 /// A key for a model's content: XXH3-64 of its bytes and length, and the scene format
-/// version (a new format builds it anew). glTF's buffers in other files are not read: a
-/// changed `.bin` beside an unchanged `.gltf` is not seen (the cache can be cleared).
+/// version (a new format builds it anew). Files a model names are not read: a changed `.bin`
+/// beside an unchanged `.gltf`, or a PLY or include of a `.pbrt` scene, is not seen (the cache
+/// can be cleared).
 fn content_key(path: &Path) -> Result<u64> {
     let mut f = std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
     let mut h = xxhash_rust::xxh3::Xxh3::new();
@@ -102,9 +106,10 @@ pub(crate) fn structured_scene(
     inputs: &[PathBuf],
     bars: &dyn Progress,
 ) -> Result<Option<megaray_import::pbrt::PbrtScene>> {
-    let name = |p: &PathBuf| p.to_string_lossy().to_ascii_lowercase();
-    let is_pbrt = |p: &PathBuf| name(p).ends_with(".pbrt") || name(p).ends_with(".pbrt.gz");
-    let is_gltf = |p: &PathBuf| name(p).ends_with(".gltf") || name(p).ends_with(".glb");
+    let is_gltf = |p: &PathBuf| {
+        let n = p.to_string_lossy().to_ascii_lowercase();
+        n.ends_with(".gltf") || n.ends_with(".glb")
+    };
     let scene = match inputs {
         [p] if is_gltf(p) => (p, megaray_import::gltf_scene::read_scene(p)?),
         _ => match inputs.iter().find(|p| is_pbrt(p)) {
@@ -117,6 +122,12 @@ pub(crate) fn structured_scene(
     };
     note(scene.0, &scene.1, bars);
     Ok(Some(scene.1))
+}
+
+/// Whether `p` names a pbrt-v4 scene (`.pbrt`, `.pbrt.gz`).
+fn is_pbrt(p: &Path) -> bool {
+    let n = p.to_string_lossy().to_ascii_lowercase();
+    n.ends_with(".pbrt") || n.ends_with(".pbrt.gz")
 }
 
 /// One note line per kind of thing a scene's reader skipped.

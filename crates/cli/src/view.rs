@@ -39,7 +39,7 @@ Controls:
 /// What the viewers (`view`, `serve`) share: the scene, how it is lit and shaded, paging.
 #[derive(Args, Clone, Debug)]
 pub struct ViewerArgs {
-    /// The scene file, or a model file (PLY, OBJ, STL, glTF/GLB: built into a cached scene
+    /// The scene file, or a model file or pbrt-v4 scene (PLY, OBJ, STL, glTF/GLB, .pbrt: built into a cached scene
     /// first). None: the demo's plant (generated and built the first time).
     pub scene: Option<PathBuf>,
     /// Starting shader: normal, diffuse, phong, mirror, glass, ao, env, auto (C cycles them).

@@ -36,6 +36,11 @@ fn a_pbrt_scene_builds_renders_from_its_camera_and_animates() {
     assert_eq!(v["instances"]["instanced_triangles"], "13");
     let (code, _, err) = run(&["render", &d("s.mray"), "-o", &d("s.png"), "--res", "64x48", "--shader", "normal"]);
     assert_eq!(code, 0, "{err}");
+    // The pbrt file itself opens too (built into a scene first), to the same picture.
+    let (code, _, err) =
+        run(&["render", &d("s.pbrt"), "--no-cache", "-o", &d("p.png"), "--res", "64x48", "--shader", "normal"]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read(d("p.png")).unwrap(), std::fs::read(d("s.png")).unwrap());
     let img = image::open(d("s.png")).unwrap().to_rgb8();
     // The scene's camera looks at the quads: the middle of the image is not background.
     let bg = img.get_pixel(0, 0);
