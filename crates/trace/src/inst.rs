@@ -236,7 +236,7 @@ struct Query<'a> {
 }
 
 /// The instances from the world down to a space: that space to the world, the world to it,
-/// and the innermost material override.
+/// and the outermost material override.
 struct Path {
     to_world: Affine,
     to_local: Affine,

@@ -1,6 +1,7 @@
-//! The trees over a group's instances: binary BVHs of instance boxes, built in core by
-//! binned SAH each time instances move (the seed rebuilds its top level every frame), and
-//! walked by a scalar loop (a group's tree is small and shallow beside an object's).
+//! The trees over a group's instances: binary BVHs of instance boxes, built in core each
+//! time instances move (the seed rebuilds its top level every frame): by binned SAH, or,
+//! above [`LBVH`] instances, as a linear BVH in Morton order; walked by a scalar loop (a
+//! group's tree is shallow beside an object's).
 
 use megaray_base::{Aabb, Ray};
 
@@ -39,7 +40,7 @@ impl InstTree {
     }
 
     /// Makes this the tree over `boxes` (empty ones are left out: they hold nothing to
-    /// hit), in this tree's arrays and `refs` (kept from build to build: fresh memory
+    /// hit), in this tree's arrays and `scratch` (kept from build to build: fresh memory
     /// costs a page fault per 4 KiB, more than the build itself).
     pub(crate) fn rebuild(&mut self, boxes: &[Aabb], scratch: &mut Scratch) {
         self.order.clear();
