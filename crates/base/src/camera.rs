@@ -2,7 +2,7 @@ use crate::{Aabb, Ray, Rays16, Vec3};
 
 /// A pinhole camera. Pixel (0, 0) is the top-left; rays go through pixel centres at
 /// sample offset (0.5, 0.5), exactly as the benchmark definitions (`shared/BENCH.md`) say.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     /// Position of the eye.
     pub eye: Vec3,

@@ -198,7 +198,7 @@ pub struct Frame {
 
 impl Frame {
     /// A black `w` x `h` frame, with zeroed AOV buffers when `aovs`.
-    fn blank(w: u32, h: u32, aovs: bool) -> Frame {
+    pub(crate) fn blank(w: u32, h: u32, aovs: bool) -> Frame {
         let n = (w * h) as usize;
         Frame {
             image: Image::new(w, h),

@@ -66,6 +66,7 @@ mod governor;
 mod image_out;
 mod lights;
 mod material;
+mod region;
 mod rows;
 mod sampling;
 mod settings;
@@ -82,6 +83,7 @@ pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, 
 pub use governor::LodGovernor;
 pub use image_out::{read_exr, save_exr, srgb, srgb_by_table, Aovs, Image, ImageError, ToneCurve, ToneMap};
 pub use lights::{Draws, LightSelect};
+pub use region::{render_pieces, Piece, Rect};
 pub use material::{Material, DEFAULT_ALBEDO};
 pub use megaray_base::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use sampling::{light_subset, pixel_offset, Sampler};

@@ -1,0 +1,478 @@
+//! [`Cluster`]: the session every rank joins; the root's frame loop (the tile queue) and the
+//! workers' service loop.
+
+use std::collections::VecDeque;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use megaray_render::{Frame, Rect, Renderer};
+use megaray_trace::jobs::JobStats;
+use megaray_trace::Tracer;
+
+use crate::wire::{ToRoot, ToWorker};
+use crate::worker::{run_frame, Link};
+use crate::{ClusterError, ClusterOptions, Transport, LANES};
+
+/// What one frame cost in communication, seen from the root.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameComm {
+    /// Bytes the root sent to other ranks.
+    pub bytes_out: u64,
+    /// Bytes the root received from other ranks.
+    pub bytes_in: u64,
+    /// Messages both ways.
+    pub messages: u64,
+    /// Seconds the frame took at the root.
+    pub seconds: f64,
+    /// Seconds of it the root's render thread did not render (waiting for tiles or for the
+    /// other ranks' last ones).
+    pub root_wait: f64,
+    /// Tiles rendered by the root.
+    pub root_tiles: u64,
+    /// Tiles in the frame.
+    pub tiles: u64,
+}
+
+/// A rank's part in a session; see the crate documentation.
+pub struct Cluster<T: Transport> {
+    t: T,
+    opts: ClusterOptions,
+    /// Render threads per rank (known at the root).
+    threads: Vec<u32>,
+    /// Ranks lost (known at the root).
+    lost: Vec<bool>,
+    /// The last frame's communication (at the root).
+    pub last: FrameComm,
+    /// All frames' communication so far (at the root).
+    pub total: FrameComm,
+}
+
+/// The root's view of one rank during a frame.
+struct Peer {
+    /// Batches sent and not yet back, oldest first.
+    outstanding: VecDeque<Vec<Rect>>,
+    /// Lanes waiting for tiles (the queue was empty while others still held some).
+    parked: u32,
+    /// When it last sent something back, or was given work while idle.
+    since: Instant,
+}
+
+impl<T: Transport> Cluster<T> {
+    /// Joins the session: every rank calls it with its scene file's header checksum and
+    /// its render threads. The root collects every rank's hello and starts the session only
+    /// if all opened the same file; otherwise every rank returns an error (the root's
+    /// [`ClusterError::SceneDiffers`] names the rank, the others get
+    /// [`ClusterError::Refused`]).
+    pub fn join(t: T, checksum: u64, threads: usize, opts: ClusterOptions) -> Result<Cluster<T>, ClusterError> {
+        let n = t.size();
+        let mut c = Cluster {
+            threads: vec![threads.max(1) as u32; n],
+            lost: vec![false; n],
+            t,
+            opts,
+            last: FrameComm::default(),
+            total: FrameComm::default(),
+        };
+        if c.t.rank() != 0 {
+            let (tag, b) = ToRoot::Hello { checksum, threads: threads as u32 }.encode();
+            c.t.send(0, tag, &b);
+            return match c.wait_root(Some(2 * opts.timeout))? {
+                ToWorker::Start(None) => Ok(c),
+                ToWorker::Start(Some(r)) => Err(ClusterError::Refused(r as usize)),
+                other => Err(ClusterError::Protocol { rank: 0, what: format!("{other:?} before the start") }),
+            };
+        }
+        let mut sums: Vec<Option<u64>> = vec![None; n];
+        sums[0] = Some(checksum);
+        let start = Instant::now();
+        while sums.iter().any(Option::is_none) {
+            match c.t.try_recv() {
+                Some((from, tag, bytes)) => match ToRoot::decode(from, tag, &bytes)? {
+                    ToRoot::Hello { checksum, threads } => {
+                        sums[from] = Some(checksum);
+                        c.threads[from] = threads.max(1);
+                    }
+                    other => return Err(ClusterError::Protocol { rank: from, what: format!("{other:?} before hello") }),
+                },
+                None if start.elapsed() > opts.timeout => {
+                    let rank = sums.iter().position(Option::is_none).unwrap();
+                    return Err(ClusterError::NoHello { rank, secs: opts.timeout.as_secs_f64() });
+                }
+                None => std::thread::sleep(opts.poll),
+            }
+        }
+        let differs = sums.iter().position(|s| *s != Some(checksum));
+        for w in 1..n {
+            let (tag, b) = ToWorker::Start(differs.map(|r| r as u32)).encode();
+            c.t.send(w, tag, &b);
+        }
+        match differs {
+            Some(rank) => Err(ClusterError::SceneDiffers { rank, ours: checksum, theirs: sums[rank].unwrap() }),
+            None => Ok(c),
+        }
+    }
+
+    /// This rank.
+    pub fn rank(&self) -> usize {
+        self.t.rank()
+    }
+
+    /// The ranks in the session.
+    pub fn size(&self) -> usize {
+        self.t.size()
+    }
+
+    /// Whether this is the root (rank 0), which owns the frames.
+    pub fn is_root(&self) -> bool {
+        self.t.rank() == 0
+    }
+
+    /// The ranks lost so far (at the root).
+    pub fn lost(&self) -> Vec<usize> {
+        (0..self.lost.len()).filter(|&r| self.lost[r]).collect()
+    }
+
+    /// The transport (to end the job: [`Transport::abort`]).
+    pub fn transport(&self) -> &T {
+        &self.t
+    }
+
+    /// The next message from the root, waiting up to `limit` (sleeping between looks,
+    /// longer and longer while nothing comes, up to 5 ms).
+    fn wait_root(&self, limit: Option<Duration>) -> Result<ToWorker, ClusterError> {
+        let start = Instant::now();
+        let mut nap = self.opts.poll;
+        loop {
+            if let Some((from, tag, bytes)) = self.t.try_recv() {
+                if from != 0 {
+                    return Err(ClusterError::Protocol { rank: from, what: "a message to a worker".into() });
+                }
+                return ToWorker::decode(0, tag, &bytes);
+            }
+            if limit.is_some_and(|l| start.elapsed() > l) {
+                return Err(ClusterError::RootSilent { rank: self.t.rank(), secs: start.elapsed().as_secs_f64() });
+            }
+            std::thread::sleep(nap);
+            nap = (nap * 2).min(Duration::from_millis(5));
+        }
+    }
+
+    /// On a worker: renders what the root asks for, frame after frame, until the root ends
+    /// the session. Each frame's camera and level-of-detail error come from the root.
+    /// Returns the frames rendered.
+    pub fn serve(&mut self, r: &mut Renderer, tracer: &Tracer, pool: &rayon::ThreadPool) -> Result<u32, ClusterError> {
+        assert!(!self.is_root(), "the root renders with render_frame");
+        let mut frames = 0;
+        loop {
+            match self.wait_root(None)? {
+                ToWorker::Frame { frame, lod_error, camera } => {
+                    r.settings.camera = camera;
+                    tracer.set_lod_error(lod_error);
+                    let mut link = TransportLink(&self.t);
+                    let silence = 2 * self.opts.timeout + Duration::from_secs(10);
+                    run_frame(&mut link, r, tracer, pool, frame, self.opts.poll, silence)?;
+                    frames += 1;
+                }
+                ToWorker::Stop => return Ok(frames),
+                other => return Err(ClusterError::Protocol { rank: 0, what: format!("{other:?} between frames") }),
+            }
+        }
+    }
+
+    /// On the root: ends the session (the other ranks' [`Cluster::serve`] return). Returns
+    /// the ranks lost; if there are any, the job can only end by [`Transport::abort`].
+    pub fn finish(self) -> Vec<usize> {
+        let (tag, b) = ToWorker::Stop.encode();
+        for w in 1..self.t.size() {
+            if !self.lost[w] {
+                self.t.send(w, tag, &b);
+            }
+        }
+        self.lost()
+    }
+
+    /// On the root: renders frame `frame` of `r`'s camera across the ranks (this rank's
+    /// share on a thread of its own, over `pool`), equal bit for bit to
+    /// `render_frame(r, tracer, frame)` without a deadline. The level-of-detail error in
+    /// force is `tracer`'s, sent to every rank.
+    pub fn render_frame(
+        &mut self,
+        r: &Renderer,
+        tracer: &Tracer,
+        pool: &rayon::ThreadPool,
+        frame: u32,
+    ) -> Result<Frame, ClusterError> {
+        assert!(self.is_root(), "workers render with serve");
+        let start = Instant::now();
+        let cam = r.settings.camera;
+        let (w, h) = (cam.width, cam.height);
+        let tiles = Rect::tiles(w, h);
+        let mut q = Queue {
+            queue: tiles.iter().copied().collect(),
+            peers: (0..self.t.size())
+                .map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: start })
+                .collect(),
+            frame: Frame::new(w, h, r.settings.aovs),
+            jobs: JobStats::default(),
+            done: 0,
+            comm: FrameComm { tiles: tiles.len() as u64, ..FrameComm::default() },
+            total_threads: (0..self.t.size()).filter(|&p| !self.lost[p]).map(|p| self.threads[p]).sum(),
+        };
+        let (tag, b) = ToWorker::Frame { frame, lod_error: tracer.lod_error(), camera: cam }.encode();
+        for p in 1..self.t.size() {
+            if !self.lost[p] {
+                self.t.send(p, tag, &b);
+                q.comm.bytes_out += b.len() as u64;
+                q.comm.messages += 1;
+            }
+        }
+        let (to_local, local_rx) = mpsc::channel();
+        let (local_tx, from_local) = mpsc::channel();
+        let (poll, timeout) = (self.opts.poll, self.opts.timeout);
+        let (res, busy) = std::thread::scope(|s| {
+            let local = s.spawn(move || {
+                let mut link = ChannelLink { tx: local_tx, rx: local_rx };
+                run_frame(&mut link, r, tracer, pool, frame, poll, Duration::MAX)
+            });
+            let mut send = Sender { t: &self.t, local: Some(&to_local), threads: &self.threads };
+            let res = q.dispatch(&mut send, &from_local, &mut self.lost, frame, poll, timeout);
+            // Closing the channel ends the render thread if an error left it waiting.
+            drop(to_local);
+            let busy = local.join().expect("the root's render thread panicked");
+            (res, busy)
+        });
+        res?;
+        let busy = busy?.busy;
+        q.comm.seconds = start.elapsed().as_secs_f64();
+        q.comm.root_wait = (q.comm.seconds - busy).max(0.0);
+        let mut f = q.frame;
+        f.jobs = q.jobs;
+        f.jobs.finished = (w * h) as u64;
+        f.jobs.rays = f.rays;
+        self.last = q.comm;
+        let t = &mut self.total;
+        t.bytes_out += q.comm.bytes_out;
+        t.bytes_in += q.comm.bytes_in;
+        t.messages += q.comm.messages;
+        t.seconds += q.comm.seconds;
+        t.root_wait += q.comm.root_wait;
+        t.root_tiles += q.comm.root_tiles;
+        t.tiles += q.comm.tiles;
+        Ok(f)
+    }
+}
+
+/// Sends the root's messages: to its own render thread over a channel, to the others over
+/// the transport.
+struct Sender<'a, T: Transport> {
+    t: &'a T,
+    local: Option<&'a mpsc::Sender<ToWorker>>,
+    threads: &'a [u32],
+}
+
+impl<T: Transport> Sender<'_, T> {
+    /// Sends `m` to rank `p`; returns the bytes sent over the transport.
+    fn send(&mut self, p: usize, m: ToWorker) -> u64 {
+        if p == 0 {
+            // A render thread that has already stopped (after an error) needs nothing.
+            let _ = self.local.map(|l| l.send(m));
+            return 0;
+        }
+        let (tag, b) = m.encode();
+        self.t.send(p, tag, &b);
+        b.len() as u64
+    }
+}
+
+/// The state of one frame at the root.
+struct Queue {
+    queue: VecDeque<Rect>,
+    peers: Vec<Peer>,
+    frame: Frame,
+    jobs: JobStats,
+    /// Tiles back.
+    done: usize,
+    comm: FrameComm,
+    total_threads: u32,
+}
+
+impl Queue {
+    /// Runs the frame's queue until every tile is back: gives every live rank [`LANES`]
+    /// batches, a new batch for each one back, and requeues the tiles of ranks lost.
+    fn dispatch<T: Transport>(
+        &mut self,
+        send: &mut Sender<T>,
+        from_local: &mpsc::Receiver<ToRoot>,
+        lost: &mut [bool],
+        frame: u32,
+        poll: Duration,
+        timeout: Duration,
+    ) -> Result<(), ClusterError> {
+        let total = self.comm.tiles as usize;
+        for p in 0..self.peers.len() {
+            if !lost[p] {
+                for _ in 0..LANES {
+                    self.feed(send, p, frame);
+                }
+            }
+        }
+        while self.done < total {
+            let mut got = false;
+            while let Some((from, tag, bytes)) = send.t.try_recv() {
+                got = true;
+                self.comm.bytes_in += bytes.len() as u64;
+                self.comm.messages += 1;
+                if from >= lost.len() || lost[from] {
+                    continue;
+                }
+                match ToRoot::decode(from, tag, &bytes)? {
+                    ToRoot::Done { frame: f, pieces, stats } if f == frame => {
+                        self.take(from, pieces, stats)?;
+                        self.feed(send, from, frame);
+                    }
+                    other => return Err(ClusterError::Protocol { rank: from, what: format!("{other:?} in frame {frame}") }),
+                }
+            }
+            while let Ok(m) = from_local.try_recv() {
+                got = true;
+                if let ToRoot::Done { pieces, stats, .. } = m {
+                    self.comm.root_tiles += pieces.len() as u64;
+                    self.take(0, pieces, stats)?;
+                    self.feed(send, 0, frame);
+                }
+            }
+            for p in 1..self.peers.len() {
+                let peer = &mut self.peers[p];
+                if lost[p] || peer.outstanding.is_empty() || peer.since.elapsed() <= timeout {
+                    continue;
+                }
+                lost[p] = true;
+                eprintln!(
+                    "megaray: rank {p} sent nothing for {:.0} s while rendering; its tiles go to the other ranks",
+                    peer.since.elapsed().as_secs_f64()
+                );
+                for batch in peer.outstanding.drain(..).rev() {
+                    batch.into_iter().rev().for_each(|t| self.queue.push_front(t));
+                }
+                peer.parked = 0;
+                self.total_threads -= send.threads[p];
+                // Lanes left waiting take the requeued tiles.
+                for q in 0..self.peers.len() {
+                    while !lost[q] && self.peers[q].parked > 0 && !self.queue.is_empty() {
+                        self.peers[q].parked -= 1;
+                        self.feed(send, q, frame);
+                    }
+                }
+            }
+            if !got {
+                std::thread::sleep(poll);
+            }
+        }
+        // Every tile is back: close every lane.
+        for p in 0..self.peers.len() {
+            while !lost[p] && self.peers[p].parked > 0 {
+                self.peers[p].parked -= 1;
+                self.send_counted(send, p, ToWorker::Work { frame, rects: Vec::new() });
+            }
+        }
+        Ok(())
+    }
+
+    fn send_counted<T: Transport>(&mut self, send: &mut Sender<T>, p: usize, m: ToWorker) {
+        let n = send.send(p, m);
+        if p != 0 {
+            self.comm.bytes_out += n;
+            self.comm.messages += 1;
+        }
+    }
+
+    /// Gives rank `p` its next batch: a share of the tiles left in proportion to its
+    /// threads (a quarter of its share, so that batches shrink toward the frame's end),
+    /// at least one tile and at most 8 per thread. With none left, the lane is parked.
+    fn feed<T: Transport>(&mut self, send: &mut Sender<T>, p: usize, frame: u32) {
+        if self.queue.is_empty() {
+            self.peers[p].parked += 1;
+            return;
+        }
+        let th = send.threads[p] as usize;
+        let share = self.queue.len() * th / (4 * self.total_threads.max(1) as usize);
+        let n = share.clamp(1, 8 * th).min(self.queue.len());
+        let rects: Vec<Rect> = self.queue.drain(..n).collect();
+        let peer = &mut self.peers[p];
+        if peer.outstanding.is_empty() {
+            peer.since = Instant::now();
+        }
+        peer.outstanding.push_back(rects.clone());
+        self.send_counted(send, p, ToWorker::Work { frame, rects });
+    }
+
+    /// Puts rank `p`'s pieces into the frame: they must be its oldest batch, in order.
+    fn take(&mut self, p: usize, pieces: Vec<megaray_render::Piece>, stats: JobStats) -> Result<(), ClusterError> {
+        let peer = &mut self.peers[p];
+        let batch = peer.outstanding.pop_front().unwrap_or_default();
+        if batch.len() != pieces.len() || batch.iter().zip(&pieces).any(|(r, pc)| *r != pc.rect) {
+            return Err(ClusterError::Protocol { rank: p, what: "tiles it was not given".into() });
+        }
+        let aovs = !self.frame.depth.is_empty();
+        for pc in &pieces {
+            let n = pc.rect.area();
+            let sizes_ok = pc.color.len() == n
+                && (!aovs || (pc.depth.len() == n && pc.normal.len() == n && pc.albedo.len() == n))
+                && (aovs || pc.depth.is_empty())
+                && (pc.approx.is_empty() || pc.approx.len() == n);
+            if !sizes_ok {
+                return Err(ClusterError::Protocol { rank: p, what: format!("a tile {:?} of the wrong size", pc.rect) });
+            }
+            self.frame.put(pc);
+        }
+        peer.since = Instant::now();
+        self.done += batch.len();
+        self.jobs.suspended += stats.suspended;
+        self.jobs.wait_secs += stats.wait_secs;
+        Ok(())
+    }
+}
+
+/// A worker's link over the transport.
+struct TransportLink<'a, T: Transport>(&'a T);
+
+impl<T: Transport> Link for TransportLink<'_, T> {
+    fn send(&mut self, m: ToRoot) {
+        let (tag, b) = m.encode();
+        self.0.send(0, tag, &b);
+    }
+    fn try_recv(&mut self) -> Result<Option<ToWorker>, ClusterError> {
+        match self.0.try_recv() {
+            Some((0, tag, bytes)) => ToWorker::decode(0, tag, &bytes).map(Some),
+            Some((from, ..)) => Err(ClusterError::Protocol { rank: from, what: "a message to a worker".into() }),
+            None => Ok(None),
+        }
+    }
+    fn rank(&self) -> usize {
+        self.0.rank()
+    }
+}
+
+/// The root's render thread's link: channels.
+struct ChannelLink {
+    tx: mpsc::Sender<ToRoot>,
+    rx: mpsc::Receiver<ToWorker>,
+}
+
+impl Link for ChannelLink {
+    fn send(&mut self, m: ToRoot) {
+        let _ = self.tx.send(m);
+    }
+    fn try_recv(&mut self) -> Result<Option<ToWorker>, ClusterError> {
+        match self.rx.try_recv() {
+            Ok(m) => Ok(Some(m)),
+            Err(mpsc::TryRecvError::Empty) => Ok(None),
+            Err(mpsc::TryRecvError::Disconnected) => {
+                Err(ClusterError::Protocol { rank: 0, what: "the root stopped its own render thread".into() })
+            }
+        }
+    }
+    fn rank(&self) -> usize {
+        0
+    }
+}

@@ -1,0 +1,66 @@
+//! A frame rendered in pieces (rectangles in any order, on any tracer) and put together is
+//! the frame rendered at once, bit for bit: what a cluster of processes relies on.
+
+mod common;
+
+use std::sync::Arc;
+
+use common::Obj;
+use megaray_base::Vec3;
+use megaray_page::{Pager, PagerOptions};
+use megaray_render::*;
+use megaray_scene::Scene;
+use megaray_trace::Tracer;
+
+#[test]
+fn pieces_put_together_equal_the_whole_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut obj = Obj::default();
+    obj.quad([
+        Vec3::new(-4.0, 0.0, -4.0),
+        Vec3::new(-4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, -4.0),
+    ]);
+    obj.sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, 48, true);
+    obj.sphere(Vec3::new(1.8, 0.5, 1.0), 0.5, 16, false);
+    let path = obj.build(dir.path(), "balls", None);
+    let scene = Scene::open(&path).unwrap();
+    // Not a multiple of the tile edge, so that edge tiles are cut.
+    let (w, h) = (75, 41);
+    let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, w, h);
+    let pager = Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 256 * 1024, fetchers: 2 }).unwrap();
+    for aovs in [false, true] {
+        for spp in [1, 3] {
+            let mut s = RenderSettings::new(cam);
+            s.shader = Builtin::Env;
+            s.light_samples = 2;
+            s.spp = spp;
+            s.aovs = aovs;
+            let env = Environment::new(SkySpec { width: 64, ..SkySpec::default() }.map(), 256, 8);
+            let r = Renderer::new(s, &scene.header().bounds).with_environment(Arc::new(env));
+            let whole = render_frame(&r, &Tracer::new(&scene), 5);
+            // Tiles in reverse, in batches of 3, on the in-core and on a paged tracer.
+            let mut tiles = Rect::tiles(w, h);
+            tiles.reverse();
+            for tracer in [Tracer::new(&scene), Tracer::paged(&pager)] {
+                let mut f = Frame::new(w, h, aovs);
+                for batch in tiles.chunks(3) {
+                    let (pieces, stats) = render_pieces(&r, &tracer, 5, batch);
+                    assert_eq!(stats.finished, batch.iter().map(|t| t.area() as u64).sum::<u64>());
+                    for p in &pieces {
+                        f.put(p);
+                    }
+                }
+                let bits = |f: &Frame| f.image.pixels.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&f), bits(&whole), "aovs {aovs} spp {spp} paged {}", tracer.pager().is_some());
+                assert_eq!(f.rays, whole.rays);
+                if aovs {
+                    assert_eq!(f.depth, whole.depth);
+                    assert_eq!(f.normal, whole.normal);
+                    assert_eq!(f.albedo, whole.albedo);
+                }
+            }
+        }
+    }
+}
