@@ -11,8 +11,8 @@ use megaray_base::{format_size, parse_size, Progress, Vec3};
 use megaray_build::{build_scene, BuildOptions, Quality};
 use megaray_gen::GenSpec;
 use megaray_render::{
-    read_exr, render_progressive, write_env, Builtin, Camera, EnvMap, Environment, RenderSettings, Renderer, SkySpec,
-    Stop, ToneCurve, ToneMap, DEFAULT_OFFSET,
+    read_exr, render_progressive, render_progressive_with, write_env, Accumulator, Builtin, Camera, EnvMap,
+    Environment, RenderSettings, Renderer, SkySpec, Stop, ToneCurve, ToneMap, DEFAULT_OFFSET,
 };
 use megaray_scene::Scene;
 use megaray_trace::Tracer;
@@ -408,6 +408,10 @@ pub struct RenderArgs {
     /// (printed with --stats and --json).
     #[arg(long, value_name = "PIXELS", default_value_t = 1.0)]
     lod_error: f32,
+    /// Under mpirun: a rank that holds tiles and sends nothing back for this long is lost
+    /// (its tiles go to the others; once the image is written the job is ended).
+    #[arg(long, value_name = "SECS", default_value_t = 60.0)]
+    mpi_timeout: f64,
     /// A camera path instead of a still: N frames orbiting the point looked at (DEG degrees
     /// in all, default 360), each rendered on its own; prints frame times and bytes read
     /// (one JSON line per frame with --json); the image is the last frame.
@@ -461,6 +465,7 @@ impl RenderArgs {
             lod_error: 1.0,
             orbit: None,
             animate: None,
+            mpi_timeout: 60.0,
         }
     }
 }
@@ -541,6 +546,9 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     if !a.exposure.is_finite() {
         bail!("--exposure must be a number");
     }
+    if !(a.mpi_timeout > 0.0 && a.mpi_timeout <= 1e6) {
+        bail!("--mpi-timeout must be a number of seconds above 0");
+    }
     // The environment, read before the scene so that a bad map fails fast.
     let map = match (&a.env, &a.sky) {
         (Some(p), _) => Some(EnvMap::load(p)?),
@@ -551,6 +559,11 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         Some(p) => Some(read_exr(p)?.0),
         None => None,
     };
+    crate::cluster::refuse_single_process_options(&[
+        ("--orbit", a.orbit.is_some()),
+        ("--animate", a.animate.is_some()),
+        ("--deadline", a.deadline.is_some()),
+    ])?;
     let animate = a.animate.as_deref().map(crate::animate::parse_animate).transpose()?;
     let opened = crate::open::scene_for(Some(&a.scene), &a.open, bars)?;
     let (scene, pager) = a.paging.open(&opened.path)?;
@@ -642,32 +655,45 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         }
         return save(&img, &a.out, exr, a.exposure, curve);
     }
+    // Under mpirun: the other ranks render what rank 0 hands out, and are done.
+    let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.mpi_timeout)?;
+    if let Some(c) = cluster.as_mut().filter(|c| !c.is_root()) {
+        c.serve(&mut renderer, &tracer, &pool)?;
+        return Ok(());
+    }
     bars.stage("frames", stop.frames.filter(|_| stop.time.is_none()).unwrap_or(0) as u64);
     let denoise = a.denoise;
     let t = Instant::now();
-    let acc = pool.install(|| {
-        render_progressive(&renderer, &tracer, stop, |acc| {
-            bars.inc(1);
-            if bars.visible() {
-                let err = acc.error().map(|e| format!("error ~{:.2}%", 100.0 * e)).unwrap_or_default();
-                bars.message(&format!("frame {} {err}", acc.frames()));
-            }
-            if let Some(r) = &reference {
-                let rmse = acc.image().relative_rmse(r);
-                let denoised = match acc.denoised().filter(|_| denoise) {
-                    Some(d) => format!(" denoised_rmse {:.3}%", 100.0 * d.relative_rmse(r)),
-                    None => String::new(),
-                };
-                eprintln!(
-                    "frame {} t {:.3} s rmse {:.3}%{denoised} error_estimate {}",
-                    acc.frames(),
-                    t.elapsed().as_secs_f64(),
-                    100.0 * rmse,
-                    acc.error().map(|e| format!("{:.3}%", 100.0 * e)).unwrap_or_else(|| "-".into())
-                );
-            }
-        })
-    });
+    let mut on_frame = |acc: &Accumulator| {
+        bars.inc(1);
+        if bars.visible() {
+            let err = acc.error().map(|e| format!("error ~{:.2}%", 100.0 * e)).unwrap_or_default();
+            bars.message(&format!("frame {} {err}", acc.frames()));
+        }
+        if let Some(r) = &reference {
+            let rmse = acc.image().relative_rmse(r);
+            let denoised = match acc.denoised().filter(|_| denoise) {
+                Some(d) => format!(" denoised_rmse {:.3}%", 100.0 * d.relative_rmse(r)),
+                None => String::new(),
+            };
+            eprintln!(
+                "frame {} t {:.3} s rmse {:.3}%{denoised} error_estimate {}",
+                acc.frames(),
+                t.elapsed().as_secs_f64(),
+                100.0 * rmse,
+                acc.error().map(|e| format!("{:.3}%", 100.0 * e)).unwrap_or_else(|| "-".into())
+            );
+        }
+    };
+    // Rank 0 of a cluster runs the frames' queue on this thread (the one that talks MPI), its
+    // own share of the tiles over the pool.
+    let acc = match cluster.as_mut() {
+        Some(c) => {
+            let frame = |i| c.render_frame(&renderer, &tracer, &pool, i);
+            render_progressive_with(&renderer, &tracer, stop, frame, &mut on_frame)?
+        }
+        None => pool.install(|| render_progressive(&renderer, &tracer, stop, &mut on_frame)),
+    };
     let secs = t.elapsed().as_secs_f64();
     bars.finish();
     if let Some(e) = scene.first_error().or_else(|| pager.as_ref().and_then(|p| p.first_error())) {
@@ -701,6 +727,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
                 "light_samples": a.light_samples, "env_lights": a.env_lights, "light_subsets": a.light_subsets,
                 "threads": pool.current_num_threads(),
                 "paging": crate::paging::stats_json(pager.as_ref(), &acc.jobs()),
+                "cluster": cluster.as_ref().map(|c| crate::cluster::stats_json(c, frames)),
             })
         );
     } else {
@@ -719,6 +746,12 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         if a.paging.stats {
             crate::paging::print_stats(pager.as_ref(), &acc.jobs());
         }
+        if let Some(c) = &cluster {
+            crate::cluster::print_stats(c, frames);
+        }
+    }
+    if let Some(c) = cluster {
+        crate::cluster::finish(c, &a.out);
     }
     Ok(())
 }

@@ -4,6 +4,7 @@
 
 mod animate;
 mod bench;
+mod cluster;
 mod cmd;
 mod fault;
 mod info;
@@ -157,7 +158,9 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     fault::ignore_file_size_signal();
-    let bars = progress::Bars::new(cli.quiet);
+    // Under mpirun only rank 0 shows progress.
+    let rank = cluster::launched_rank();
+    let bars = progress::Bars::new(cli.quiet || rank.is_some_and(|r| r > 0));
     if let Err(e) = kernels_from_env().and_then(megaray_trace::Kernels::configure) {
         eprintln!("megaray: error: {e}");
         std::process::exit(1);
@@ -176,7 +179,10 @@ fn main() {
     if let Err(e) = res {
         use megaray_base::Progress;
         bars.finish();
-        eprintln!("megaray: error: {}", one_line(&e));
+        if e.downcast_ref::<cluster::Quiet>().is_none() {
+            let who = rank.map(|r| format!("rank {r}: ")).unwrap_or_default();
+            eprintln!("megaray: error: {who}{}", one_line(&e));
+        }
         std::process::exit(1);
     }
 }

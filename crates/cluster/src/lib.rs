@@ -50,6 +50,24 @@ pub trait Transport {
     fn abort(&self, code: i32) -> !;
 }
 
+impl<T: Transport + ?Sized> Transport for Box<T> {
+    fn rank(&self) -> usize {
+        (**self).rank()
+    }
+    fn size(&self) -> usize {
+        (**self).size()
+    }
+    fn send(&self, to: usize, tag: Tag, bytes: &[u8]) {
+        (**self).send(to, tag, bytes)
+    }
+    fn try_recv(&self) -> Option<(usize, Tag, Vec<u8>)> {
+        (**self).try_recv()
+    }
+    fn abort(&self, code: i32) -> ! {
+        (**self).abort(code)
+    }
+}
+
 /// How patient the ranks are.
 #[derive(Clone, Copy, Debug)]
 pub struct ClusterOptions {

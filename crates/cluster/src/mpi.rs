@@ -4,6 +4,7 @@
 //! blocking (`MPI_Improbe`), so that a waiting rank sleeps instead of spinning on a core.
 
 use mpi::environment::Universe;
+use mpi::point_to_point::MatchedReceiveVec;
 use mpi::topology::SimpleCommunicator;
 use mpi::traits::*;
 use mpi::Threading;
@@ -50,8 +51,8 @@ impl Transport for MpiTransport {
         self.world.process_at_rank(to as i32).send_with_tag(bytes, tag as i32);
     }
     fn try_recv(&self) -> Option<(usize, Tag, Vec<u8>)> {
-        let (msg, status) = self.world.any_process().immediate_matched_probe()?;
-        let (bytes, _) = msg.matched_receive_vec::<u8>();
+        let probed = self.world.any_process().immediate_matched_probe()?;
+        let (bytes, status) = probed.matched_receive_vec::<u8>();
         Some((status.source_rank() as usize, status.tag() as Tag, bytes))
     }
     fn abort(&self, code: i32) -> ! {

@@ -92,7 +92,9 @@ impl<T: Transport> Cluster<T> {
                         sums[from] = Some(checksum);
                         c.threads[from] = threads.max(1);
                     }
-                    other => return Err(ClusterError::Protocol { rank: from, what: format!("{other:?} before hello") }),
+                    other => {
+                        return Err(ClusterError::Protocol { rank: from, what: format!("{other:?} before hello") })
+                    }
                 },
                 None if start.elapsed() > opts.timeout => {
                     let rank = sums.iter().position(Option::is_none).unwrap();
@@ -181,7 +183,7 @@ impl<T: Transport> Cluster<T> {
 
     /// On the root: ends the session (the other ranks' [`Cluster::serve`] return). Returns
     /// the ranks lost; if there are any, the job can only end by [`Transport::abort`].
-    pub fn finish(self) -> Vec<usize> {
+    pub fn finish(&mut self) -> Vec<usize> {
         let (tag, b) = ToWorker::Stop.encode();
         for w in 1..self.t.size() {
             if !self.lost[w] {
@@ -209,9 +211,7 @@ impl<T: Transport> Cluster<T> {
         let tiles = Rect::tiles(w, h);
         let mut q = Queue {
             queue: tiles.iter().copied().collect(),
-            peers: (0..self.t.size())
-                .map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: start })
-                .collect(),
+            peers: (0..self.t.size()).map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: start }).collect(),
             frame: Frame::new(w, h, r.settings.aovs),
             jobs: JobStats::default(),
             done: 0,
@@ -309,8 +309,8 @@ impl Queue {
         timeout: Duration,
     ) -> Result<(), ClusterError> {
         let total = self.comm.tiles as usize;
-        for p in 0..self.peers.len() {
-            if !lost[p] {
+        for (p, &gone) in lost.iter().enumerate() {
+            if !gone {
                 for _ in 0..LANES {
                     self.feed(send, p, frame);
                 }
@@ -330,7 +330,9 @@ impl Queue {
                         self.take(from, pieces, stats)?;
                         self.feed(send, from, frame);
                     }
-                    other => return Err(ClusterError::Protocol { rank: from, what: format!("{other:?} in frame {frame}") }),
+                    other => {
+                        return Err(ClusterError::Protocol { rank: from, what: format!("{other:?} in frame {frame}") })
+                    }
                 }
             }
             while let Ok(m) = from_local.try_recv() {
@@ -357,8 +359,8 @@ impl Queue {
                 peer.parked = 0;
                 self.total_threads -= send.threads[p];
                 // Lanes left waiting take the requeued tiles.
-                for q in 0..self.peers.len() {
-                    while !lost[q] && self.peers[q].parked > 0 && !self.queue.is_empty() {
+                for (q, &gone) in lost.iter().enumerate() {
+                    while !gone && self.peers[q].parked > 0 && !self.queue.is_empty() {
                         self.peers[q].parked -= 1;
                         self.feed(send, q, frame);
                     }
@@ -369,8 +371,8 @@ impl Queue {
             }
         }
         // Every tile is back: close every lane.
-        for p in 0..self.peers.len() {
-            while !lost[p] && self.peers[p].parked > 0 {
+        for (p, &gone) in lost.iter().enumerate() {
+            while !gone && self.peers[p].parked > 0 {
                 self.peers[p].parked -= 1;
                 self.send_counted(send, p, ToWorker::Work { frame, rects: Vec::new() });
             }
@@ -421,7 +423,10 @@ impl Queue {
                 && (aovs || pc.depth.is_empty())
                 && (pc.approx.is_empty() || pc.approx.len() == n);
             if !sizes_ok {
-                return Err(ClusterError::Protocol { rank: p, what: format!("a tile {:?} of the wrong size", pc.rect) });
+                return Err(ClusterError::Protocol {
+                    rank: p,
+                    what: format!("a tile {:?} of the wrong size", pc.rect),
+                });
             }
             self.frame.put(pc);
         }

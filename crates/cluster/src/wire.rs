@@ -105,7 +105,8 @@ impl<'a> In<'a> {
     /// `n` values of `T` (checked against the bytes left before anything is allocated).
     fn pods<T: bytemuck::Pod>(&mut self, n: usize) -> Result<Vec<T>, ClusterError> {
         let len = n.checked_mul(std::mem::size_of::<T>()).filter(|&l| l <= self.b.len());
-        let len = len.ok_or_else(|| ClusterError::Protocol { rank: self.from, what: "a count past the message's end".into() })?;
+        let len = len
+            .ok_or_else(|| ClusterError::Protocol { rank: self.from, what: "a count past the message's end".into() })?;
         Ok(bytemuck::pod_collect_to_vec(self.take(len)?))
     }
     fn end(&self) -> Result<(), ClusterError> {
@@ -196,7 +197,7 @@ impl ToRoot {
                 for p in pieces {
                     o.rect(&p.rect);
                     o.u64(p.rays);
-                    let flags = (!p.depth.is_empty() as u32) * AOVS | (!p.approx.is_empty() as u32) * APPROX;
+                    let flags = ((!p.depth.is_empty() as u32) * AOVS) | ((!p.approx.is_empty() as u32) * APPROX);
                     o.u32(flags);
                     o.bytes(bytemuck::cast_slice(&p.color));
                     if flags & AOVS != 0 {
@@ -235,9 +236,13 @@ impl ToRoot {
                 let mut pieces = Vec::with_capacity(n);
                 for _ in 0..n {
                     let rect = i.rect()?;
-                    let area = (rect.x1 as u64).checked_sub(rect.x0 as u64).zip((rect.y1 as u64).checked_sub(rect.y0 as u64));
+                    let area =
+                        (rect.x1 as u64).checked_sub(rect.x0 as u64).zip((rect.y1 as u64).checked_sub(rect.y0 as u64));
                     if !matches!(area, Some((w, h)) if w * h <= i.b.len() as u64) {
-                        return Err(ClusterError::Protocol { rank: from, what: format!("a tile {rect:?} past the message's end") });
+                        return Err(ClusterError::Protocol {
+                            rank: from,
+                            what: format!("a tile {rect:?} past the message's end"),
+                        });
                     }
                     let (rays, flags) = (i.u64()?, i.u32()?);
                     let a = rect.area();

@@ -66,7 +66,9 @@ fn frames_equal_one_process_bit_for_bit() {
                 let (scene, path) = (&scene, &path);
                 s.spawn(move || {
                     // Rank 1 pages within a small budget; rank 2 maps the file whole.
-                    let pager = Pager::open(path, PagerOptions { budget: Pager::min_budget(scene) + (256 << 10), fetchers: 1 }).unwrap();
+                    let pager =
+                        Pager::open(path, PagerOptions { budget: Pager::min_budget(scene) + (256 << 10), fetchers: 1 })
+                            .unwrap();
                     let tracer = if t.rank() == 1 { Tracer::paged(&pager) } else { Tracer::new(scene) };
                     let mut r = renderer(scene, aovs);
                     let mut c = Cluster::join(t, checksum, 1, opts()).unwrap();
@@ -75,14 +77,19 @@ fn frames_equal_one_process_bit_for_bit() {
             }
             let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
             let p = pool();
-            let lost = as_root(&mut c, |c| for (f, want) in expected.iter().enumerate() {
-                let got = c.render_frame(&one, &tracer, &p, f as u32).unwrap();
-                assert_eq!(bits(&got), bits(want), "frame {f} aovs {aovs}");
-                assert_eq!((got.depth.clone(), got.normal.clone(), got.albedo.clone()), (want.depth.clone(), want.normal.clone(), want.albedo.clone()));
-                assert_eq!(got.rays, want.rays);
-                assert_eq!(c.last.tiles, Rect::tiles(150, 83).len() as u64);
-                assert!(c.last.root_tiles < c.last.tiles, "the other ranks rendered nothing: {:?}", c.last);
-                assert!(c.last.bytes_in > 0 && c.last.bytes_out > 0);
+            let lost = as_root(&mut c, |c| {
+                for (f, want) in expected.iter().enumerate() {
+                    let got = c.render_frame(&one, &tracer, &p, f as u32).unwrap();
+                    assert_eq!(bits(&got), bits(want), "frame {f} aovs {aovs}");
+                    assert_eq!(
+                        (got.depth.clone(), got.normal.clone(), got.albedo.clone()),
+                        (want.depth.clone(), want.normal.clone(), want.albedo.clone())
+                    );
+                    assert_eq!(got.rays, want.rays);
+                    assert_eq!(c.last.tiles, Rect::tiles(150, 83).len() as u64);
+                    assert!(c.last.root_tiles < c.last.tiles, "the other ranks rendered nothing: {:?}", c.last);
+                    assert!(c.last.bytes_in > 0 && c.last.bytes_out > 0);
+                }
             });
             assert!(lost.is_empty());
         });

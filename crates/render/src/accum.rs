@@ -292,8 +292,21 @@ pub fn render_progressive(
     r: &Renderer,
     tracer: &Tracer,
     stop: Stop,
-    mut on_frame: impl FnMut(&Accumulator),
+    on_frame: impl FnMut(&Accumulator),
 ) -> Accumulator {
+    let frame = |i| Ok::<_, std::convert::Infallible>(render_frame(r, tracer, i));
+    render_progressive_with(r, tracer, stop, frame, on_frame).unwrap_or_else(|e| match e {})
+}
+
+/// [`render_progressive`] with frames made by `frame` (frame index -> frame), which may fail
+/// (a frame shared between processes): the first error ends the run.
+pub fn render_progressive_with<E>(
+    r: &Renderer,
+    tracer: &Tracer,
+    stop: Stop,
+    mut frame: impl FnMut(u32) -> Result<Frame, E>,
+    mut on_frame: impl FnMut(&Accumulator),
+) -> Result<Accumulator, E> {
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
     let mut acc = Accumulator::new(w, h);
     let mut governor = crate::LodGovernor::new(tracer);
@@ -304,7 +317,7 @@ pub fn render_progressive(
         (None, None) => 1,
     };
     while acc.frames() < max_frames {
-        let f = render_frame(r, tracer, acc.frames());
+        let f = frame(acc.frames())?;
         acc.add_frame(&f);
         governor.after_frame(tracer);
         on_frame(&acc);
@@ -316,5 +329,5 @@ pub fn render_progressive(
             break;
         }
     }
-    acc
+    Ok(acc)
 }

@@ -75,7 +75,7 @@ pub mod shaders;
 mod sky;
 mod world;
 
-pub use accum::{render_progressive, Accumulator, Stop};
+pub use accum::{render_progressive, render_progressive_with, Accumulator, Stop};
 pub use denoise::{denoise, DenoiseInput, PASSES as DENOISE_PASSES};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
 pub use env_sample::EnvSampler;
@@ -83,9 +83,9 @@ pub use frame::{render_frame, render_frame_with, Frame, FrameOptions, Renderer, 
 pub use governor::LodGovernor;
 pub use image_out::{read_exr, save_exr, srgb, srgb_by_table, Aovs, Image, ImageError, ToneCurve, ToneMap};
 pub use lights::{Draws, LightSelect};
-pub use region::{render_pieces, Piece, Rect};
 pub use material::{Material, DEFAULT_ALBEDO};
 pub use megaray_base::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
+pub use region::{render_pieces, Piece, Rect};
 pub use sampling::{light_subset, pixel_offset, Sampler};
 pub use settings::{default_light, Builtin, RenderSettings};
 pub use shader::{ShadeCtx, Shader, SurfaceHit};

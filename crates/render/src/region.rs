@@ -12,7 +12,7 @@ use crate::frame::{Frame, Renderer, TILE};
 use crate::rows::{Group, GROUP};
 
 /// A rectangle of pixels: columns `x0..x1` of rows `y0..y1`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct Rect {
     /// First column.
     pub x0: u32,
@@ -69,12 +69,6 @@ pub struct Piece {
     pub rays: u64,
 }
 
-impl Default for Rect {
-    fn default() -> Rect {
-        Rect { x0: 0, y0: 0, x1: 0, y1: 0 }
-    }
-}
-
 impl Piece {
     /// A black piece of `rect`, with AOV buffers when `aovs`.
     fn blank(rect: Rect, aovs: bool) -> Piece {
@@ -105,7 +99,8 @@ pub fn render_pieces(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect]) 
     let aovs = r.settings.aovs;
     let mut pieces: Vec<Piece> = rects.iter().map(|&rect| Piece::blank(rect, aovs)).collect();
     let paged = tracer.pager().is_some();
-    let job_opts = |chunk| JobOptions { chunk, deadline: None, max_parked: jobs::MAX_PARKED, stand_in: r.settings.stand_in };
+    let job_opts =
+        |chunk| JobOptions { chunk, deadline: None, max_parked: jobs::MAX_PARKED, stand_in: r.settings.stand_in };
     let mut stats = JobStats::default();
     if aovs {
         // A pixel a job: (piece, index in it).

@@ -29,7 +29,8 @@ fn pieces_put_together_equal_the_whole_frame() {
     // Not a multiple of the tile edge, so that edge tiles are cut.
     let (w, h) = (75, 41);
     let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, w, h);
-    let pager = Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 256 * 1024, fetchers: 2 }).unwrap();
+    let pager =
+        Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 256 * 1024, fetchers: 2 }).unwrap();
     for aovs in [false, true] {
         for spp in [1, 3] {
             let mut s = RenderSettings::new(cam);

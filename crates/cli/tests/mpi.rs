@@ -1,0 +1,158 @@
+//! `mpirun -n 2 megaray render ...` (the `mpi` feature; run with
+//! `cargo test --release -p megaray --features mpi --test mpi`, which needs `mpirun`): the
+//! same PNG, byte for byte, as one process; a rank killed or stopped mid-frame ends or
+//! finishes the job within the timeout, in one line naming it; a rank with another scene
+//! file refuses to start.
+#![cfg(feature = "mpi")]
+
+mod common;
+use common::*;
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// `mpirun` with 2 ranks (oversubscribed: CI machines may have fewer cores; as root if we
+/// are), running `args` (an MPMD line when it holds `:`).
+fn mpirun(args: &[&str]) -> Command {
+    let mut c = Command::new("mpirun");
+    c.args(["--oversubscribe", "--allow-run-as-root", "--bind-to", "none"]);
+    c.args(args);
+    c.stdout(Stdio::piped()).stderr(Stdio::piped());
+    c
+}
+
+fn scene(dir: &Path) -> String {
+    let out = dir.join("s.mray").to_string_lossy().into_owned();
+    let model = megaray_testkit::model("stanford-bunny.obj");
+    let (code, _, err) = run(&["build", model.to_str().unwrap(), "-o", &out, "--tile-size", "64K"]);
+    assert_eq!(code, 0, "{err}");
+    out
+}
+
+#[test]
+fn two_ranks_write_the_same_png_as_one_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let bin = bin();
+    let bin = bin.to_str().unwrap();
+    let cases: [&[&str]; 4] = [
+        &["--shader", "auto"],
+        &["--shader", "env", "--sky", "sky:width=64", "--frames", "3", "--light-samples", "2"],
+        &["--shader", "env", "--sky", "sky:width=64", "--frames", "2", "--denoise", "--mem", "1M", "--lod-error", "0"],
+        &["--shader", "ao", "--spp", "2", "--mem", "1M", "--lod-error", "0"],
+    ];
+    for (k, extra) in cases.iter().enumerate() {
+        let one = dir.path().join(format!("one{k}.png")).to_string_lossy().into_owned();
+        let two = dir.path().join(format!("two{k}.png")).to_string_lossy().into_owned();
+        let common = ["--res", "150x100", "--threads", "1", "-q"];
+        let mut args = vec!["render", &s, "-o", &one];
+        args.extend(common.iter().chain(extra.iter()));
+        let (code, _, err) = run(&args);
+        assert_eq!(code, 0, "{err}");
+        let mut args = vec!["-n", "2", bin, "render", &s, "-o", &two, "--json"];
+        args.extend(common.iter().chain(extra.iter()));
+        let out = mpirun(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{extra:?}: {err}");
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON document, from rank 0 only");
+        assert_eq!(v["cluster"]["ranks"], 2);
+        assert!(v["cluster"]["root_tile_share"].as_f64().unwrap() < 1.0, "rank 1 rendered nothing: {v}");
+        assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "{extra:?}: the images differ");
+    }
+}
+
+/// The pid of rank `rank` among the children of the launcher `launcher` (by the rank
+/// variable in its environment), once it exists.
+fn rank_pid(launcher: u32, rank: usize) -> u32 {
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(20) {
+        for e in std::fs::read_dir("/proc").unwrap().flatten() {
+            let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else { continue };
+            let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+            let ppid =
+                stat.rsplit(')').next().and_then(|s| s.split_whitespace().nth(1)).and_then(|p| p.parse::<u32>().ok());
+            let env = std::fs::read(format!("/proc/{pid}/environ")).unwrap_or_default();
+            let want = format!("OMPI_COMM_WORLD_RANK={rank}");
+            if ppid == Some(launcher) && env.split(|&b| b == 0).any(|v| v == want.as_bytes()) {
+                return pid;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    panic!("rank {rank} of launcher {launcher} not found");
+}
+
+/// Runs a long 2-rank render, sends `signal` to rank 1 once it has had time to start
+/// rendering, and returns (exit status, stderr, seconds after the signal).
+fn signalled_run(dir: &Path, s: &str, signal: &str, out: &str, frames: &str) -> (bool, String, f64) {
+    let bin = bin();
+    let args = ["-n", "2", bin.to_str().unwrap(), "render", s, "-o", out, "--res", "200x150", "--threads", "1"];
+    let mut cmd = mpirun(&args);
+    cmd.args(["--shader", "ao", "--spp", "4", "--frames", frames, "--mpi-timeout", "2", "-q"]);
+    let child = cmd.current_dir(dir).spawn().unwrap();
+    let pid = rank_pid(child.id(), 1);
+    std::thread::sleep(Duration::from_millis(1500));
+    let status = Command::new("kill").args([signal, &pid.to_string()]).status().unwrap();
+    assert!(status.success());
+    let t = Instant::now();
+    let out = child.wait_with_output().unwrap();
+    let secs = t.elapsed().as_secs_f64();
+    let _ = Command::new("kill").args(["-KILL", &pid.to_string()]).status();
+    (out.status.success(), String::from_utf8_lossy(&out.stderr).into_owned(), secs)
+}
+
+#[test]
+fn a_rank_killed_mid_frame_ends_the_job_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let out = dir.path().join("k.png").to_string_lossy().into_owned();
+    let (ok, err, secs) = signalled_run(dir.path(), &s, "-KILL", &out, "100000");
+    assert!(!ok, "the job went on as if nothing happened: {err}");
+    assert!(secs < 20.0, "the job took {secs:.1} s to end");
+    assert!(err.contains("rank 1"), "no line names rank 1: {err}");
+}
+
+#[test]
+fn a_rank_stopped_mid_frame_loses_its_tiles_and_the_image_is_still_exact() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    // About 6 s in one process, so that rank 1 is stopped well inside the run.
+    let frames = "600";
+    let one = dir.path().join("one.png").to_string_lossy().into_owned();
+    let common = ["--res", "200x150", "--threads", "1", "--shader", "ao", "--spp", "4", "--frames", frames, "-q"];
+    let mut args = vec!["render", &s, "-o", &one];
+    args.extend(common);
+    let (code, _, err) = run(&args);
+    assert_eq!(code, 0, "{err}");
+    let two = dir.path().join("two.png").to_string_lossy().into_owned();
+    let (_, err, secs) = signalled_run(dir.path(), &s, "-STOP", &two, frames);
+    assert!(err.contains("rank 1 sent nothing for 2 s"), "{err}");
+    assert!(secs < 60.0, "the job took {secs:.1} s to end");
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).expect("no image written"), "the images differ");
+}
+
+#[test]
+fn a_rank_with_another_scene_file_refuses_to_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let other = dir.path().join("t.mray").to_string_lossy().into_owned();
+    let model = megaray_testkit::model("stanford-bunny.obj");
+    let (code, _, err) = run(&["build", model.to_str().unwrap(), "-o", &other, "--tile-size", "128K"]);
+    assert_eq!(code, 0, "{err}");
+    let bin = bin();
+    let bin = bin.to_str().unwrap();
+    let png = dir.path().join("x.png").to_string_lossy().into_owned();
+    let r = ["-o", &png, "--res", "64x48", "-q"];
+    let mut args = vec!["-n", "1", bin, "render", &s];
+    args.extend(r);
+    args.extend([":", "-n", "1", bin, "render", &other]);
+    args.extend(r);
+    let out = mpirun(&args).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    let ours: Vec<&str> = err.lines().filter(|l| l.starts_with("megaray")).collect();
+    assert_eq!(ours.len(), 1, "{err}");
+    assert!(ours[0].contains("rank 1's scene file differs from rank 0's"), "{err}");
+    assert!(!Path::new(&png).exists());
+}
