@@ -102,12 +102,95 @@ pub(crate) fn print_stats(c: &Session, frames: u32) {
     );
 }
 
-/// Ends the session at rank 0 once `out` is written. Ranks lost on the way can neither be
-/// waited for nor finalised: then the whole job is ended (MPI_Abort), saying why.
-pub(crate) fn finish(mut c: Session, out: &std::path::Path) {
+/// Ends the session at rank 0 once its work is `done` ("x.png written"). Ranks lost on the
+/// way can neither be waited for nor finalised: then the whole job is ended (MPI_Abort),
+/// saying why.
+pub(crate) fn finish(mut c: Session, done: &str) {
     let lost = c.finish();
     if !lost.is_empty() {
-        eprintln!("megaray: {} written; ending the job, as rank(s) {lost:?} stopped answering", out.display());
+        let line = format!("megaray: {done}; ending the job, as rank(s) {lost:?} stopped answering\n");
+        eprint!("{line}");
         c.transport().abort(3);
+    }
+}
+
+/// A worker rank of `view` or `serve`: renders rank 0's frames with the view's settings
+/// (`opts`: shader, light samples, sky) until it ends the session.
+pub(crate) fn serve_view(
+    c: &mut Session,
+    opts: &megaray_view::ViewOptions,
+    tracer: &megaray_trace::Tracer,
+    pool: &rayon::ThreadPool,
+) -> Result<()> {
+    let bounds = tracer.scene().header().bounds;
+    let mut s = megaray_render::RenderSettings::new(megaray_render::Camera::framing(
+        &bounds,
+        megaray_render::DEFAULT_OFFSET,
+        8,
+        8,
+    ));
+    s.shader = opts.shader;
+    s.light_samples = opts.light_samples;
+    let mut r = megaray_render::Renderer::new(s, &bounds);
+    c.serve(&mut r, opts.sky.clone(), tracer, pool)?;
+    Ok(())
+}
+
+/// Rank 0's frames of a view, rendered across the session's ranks.
+pub(crate) fn frame_source<'t>(
+    c: &'t mut Session,
+    tracer: &'t megaray_trace::Tracer,
+    pool: &'t rayon::ThreadPool,
+) -> megaray_view::FrameSource<'t> {
+    Box::new(move |r, i| c.render_frame(r, tracer, pool, i).map_err(|e| e.to_string()))
+}
+
+/// A frame a page of `serve` asks of rank 0's main thread (the one that talks MPI).
+pub(crate) struct FrameRequest {
+    settings: megaray_render::RenderSettings,
+    env: bool,
+    index: u32,
+    reply: std::sync::mpsc::Sender<Result<megaray_render::Frame, String>>,
+}
+
+/// A page's frames, asked of the main thread through `tx`.
+pub(crate) fn request_source<'t>(tx: std::sync::mpsc::Sender<FrameRequest>) -> megaray_view::FrameSource<'t> {
+    Box::new(move |r, index| {
+        let (reply, answer) = std::sync::mpsc::channel();
+        let req = FrameRequest { settings: r.settings.clone(), env: r.has_environment(), index, reply };
+        tx.send(req).map_err(|_| "the cluster has stopped".to_string())?;
+        answer.recv().map_err(|_| "the cluster has stopped".to_string())?
+    })
+}
+
+/// Rank 0 of `serve`: renders the pages' frames across the ranks, one at a time, in the
+/// order asked, until no page can ask any more.
+pub(crate) fn serve_requests(
+    c: &mut Session,
+    requests: std::sync::mpsc::Receiver<FrameRequest>,
+    sky: Option<std::sync::Arc<megaray_render::Environment>>,
+    tracer: &megaray_trace::Tracer,
+    pool: &rayon::ThreadPool,
+) {
+    let bounds = tracer.scene().header().bounds;
+    // The renderer of the last request, kept while shader, light samples and sky stay.
+    let mut last: Option<megaray_render::Renderer> = None;
+    while let Ok(req) = requests.recv() {
+        let s = &req.settings;
+        let same = last.as_ref().is_some_and(|r| {
+            r.settings.shader == s.shader
+                && r.settings.light_samples == s.light_samples
+                && r.has_environment() == req.env
+        });
+        if !same {
+            let fresh = megaray_render::Renderer::new(req.settings.clone(), &bounds);
+            last = Some(match (req.env, &sky) {
+                (true, Some(env)) => fresh.with_environment(env.clone()),
+                _ => fresh,
+            });
+        }
+        let r = last.as_mut().expect("made above");
+        r.settings = req.settings;
+        let _ = req.reply.send(c.render_frame(r, tracer, pool, req.index).map_err(|e| e.to_string()));
     }
 }

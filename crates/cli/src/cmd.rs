@@ -614,10 +614,13 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     let pool = pool(a.threads)?;
     let t = Instant::now();
     let mut renderer = Renderer::new(settings, &b);
-    if let Some(mut map) = map {
+    let env = map.map(|mut map| {
         map.rotate = a.env_rotate.to_radians();
         map.scale *= a.env_scale;
-        renderer = renderer.with_environment(Arc::new(Environment::new(map, a.env_lights, a.light_subsets)));
+        Arc::new(Environment::new(map, a.env_lights, a.light_subsets))
+    });
+    if let Some(env) = &env {
+        renderer = renderer.with_environment(env.clone());
     }
     let setup = t.elapsed().as_secs_f64();
     let stop = Stop { frames: a.frames, time: a.time.map(Duration::from_secs_f64) };
@@ -658,7 +661,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     // Under mpirun: the other ranks render what rank 0 hands out, and are done.
     let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.mpi_timeout)?;
     if let Some(c) = cluster.as_mut().filter(|c| !c.is_root()) {
-        c.serve(&mut renderer, &tracer, &pool)?;
+        c.serve(&mut renderer, env, &tracer, &pool)?;
         return Ok(());
     }
     bars.stage("frames", stop.frames.filter(|_| stop.time.is_none()).unwrap_or(0) as u64);
@@ -751,7 +754,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         }
     }
     if let Some(c) = cluster {
-        crate::cluster::finish(c, &a.out);
+        crate::cluster::finish(c, &format!("{} written", a.out.display()));
     }
     Ok(())
 }

@@ -180,8 +180,10 @@ fn main() {
         use megaray_base::Progress;
         bars.finish();
         if e.downcast_ref::<cluster::Quiet>().is_none() {
+            // One write, so that the line stays whole among other ranks' output under mpirun.
             let who = rank.map(|r| format!("rank {r}: ")).unwrap_or_default();
-            eprintln!("megaray: error: {who}{}", one_line(&e));
+            let line = format!("megaray: error: {who}{}\n", one_line(&e));
+            eprint!("{line}");
         }
         std::process::exit(1);
     }

@@ -63,6 +63,11 @@ pub fn serve(a: ServeArgs, bars: &Bars) -> Result<()> {
     let tracer = Tracer::paged_or_new(&scene, pager.as_ref()).with_lod_error(a.viewer.lod_error);
     let pool = crate::cmd::pool(a.viewer.threads)?;
     a.viewer.options(640, 480)?; // the options' errors before listening
+                                 // Under mpirun rank 0 serves the pages and the other ranks render their frames' tiles.
+    let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.viewer.mpi_timeout)?;
+    if let Some(c) = cluster.as_mut().filter(|c| !c.is_root()) {
+        return crate::cluster::serve_view(c, &a.viewer.options(640, 480)?, &tracer, &pool);
+    }
     let listener = TcpListener::bind(&a.bind).with_context(|| format!("--bind {}: cannot listen", a.bind))?;
     let addr = listener.local_addr().context("cannot read the listening address")?;
     let name = opened.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -72,6 +77,7 @@ pub fn serve(a: ServeArgs, bars: &Bars) -> Result<()> {
             "megaray serve: warning: listening on {addr}, not loopback: other machines that reach it can view the scene"
         );
     }
+    let (requests_tx, requests) = std::sync::mpsc::channel();
     let clients = AtomicUsize::new(0);
     let log = std::sync::Mutex::new(crate::view::FrameLog::create(a.viewer.log.as_deref())?);
     let server = Server {
@@ -83,17 +89,29 @@ pub fn serve(a: ServeArgs, bars: &Bars) -> Result<()> {
         max_clients: a.max_clients,
         log: &log,
         next_client: AtomicUsize::new(1),
+        frames: cluster.is_some().then_some(requests_tx),
     };
     std::thread::scope(|s| {
-        for conn in listener.incoming() {
-            let Ok(stream) = conn else { continue };
-            let server = &server;
-            s.spawn(move || {
-                let peer = stream.peer_addr().map_or("?".into(), |p: SocketAddr| p.to_string());
-                if let Err(e) = server.connection(stream) {
-                    eprintln!("megaray serve: {peer}: {e}");
-                }
-            });
+        let listen = || {
+            for conn in listener.incoming() {
+                let Ok(stream) = conn else { continue };
+                let server = &server;
+                s.spawn(move || {
+                    let peer = stream.peer_addr().map_or("?".into(), |p: SocketAddr| p.to_string());
+                    if let Err(e) = server.connection(stream) {
+                        eprintln!("megaray serve: {peer}: {e}");
+                    }
+                });
+            }
+        };
+        match cluster.as_mut() {
+            // This thread talks MPI: the pages' frames come to it.
+            Some(c) => {
+                s.spawn(listen);
+                let sky = a.viewer.options(640, 480).ok().and_then(|o| o.sky);
+                crate::cluster::serve_requests(c, requests, sky, &tracer, &pool);
+            }
+            None => listen(),
         }
     });
     Ok(())
@@ -110,6 +128,8 @@ struct Server<'a, 's> {
     /// `--log`: the frames sent, of every page.
     log: &'a std::sync::Mutex<crate::view::FrameLog>,
     next_client: AtomicUsize,
+    /// Under mpirun: where the pages ask for their frames (rank 0's main thread).
+    frames: Option<std::sync::mpsc::Sender<crate::cluster::FrameRequest>>,
 }
 
 impl Server<'_, '_> {
@@ -241,7 +261,8 @@ impl Server<'_, '_> {
     fn view(&self, w: u32, h: u32) -> Result<ViewCore<'_, '_>> {
         let mut opts = self.viewer.options(w, h)?;
         crate::view::scene_home(&mut opts, self.tracer.scene());
-        Ok(ViewCore::new(self.tracer, self.pool, opts))
+        let source = self.frames.clone().map(crate::cluster::request_source);
+        Ok(crate::view::with_source(ViewCore::new(self.tracer, self.pool, opts), source))
     }
 }
 

@@ -10,7 +10,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use megaray_render::{Builtin, EnvMap, Environment, SkySpec};
 use megaray_trace::Tracer;
-use megaray_view::{Event, Key, Script, Step, ViewCore, ViewOptions};
+use megaray_view::{Event, FrameSource, Key, Script, Step, ViewCore, ViewOptions};
 use serde_json::json;
 
 use crate::progress::Bars;
@@ -71,6 +71,11 @@ pub struct ViewerArgs {
     /// guided by the first hits' albedo, normal and depth smooths them until they converge)
     #[arg(long)]
     pub no_denoise: bool,
+    /// Under mpirun: a rank that holds tiles and sends nothing back for this long is lost
+    /// (see `megaray render --help`). Frames across ranks are whole and exact (no frame
+    /// budget).
+    #[arg(long, value_name = "SECS", default_value_t = 60.0)]
+    pub mpi_timeout: f64,
     #[command(flatten)]
     pub paging: crate::paging::PagingArgs,
     #[command(flatten)]
@@ -165,27 +170,45 @@ pub fn view(a: ViewArgs, bars: &Bars) -> Result<()> {
     let mut opts = a.viewer.options(a.res.0, a.res.1)?;
     scene_home(&mut opts, &scene);
     let name = opened.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    if let Some(script) = &a.script {
-        if !a.budgeted {
-            opts.frame_budget = None;
-        }
-        let out = a.out.as_deref().expect("clap requires --out with --script");
-        return replay(&tracer, &pool, opts, script, out, FrameLog::create(a.viewer.log.as_deref())?);
+    // Under mpirun rank 0 shows the view and the other ranks render its frames' tiles.
+    let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.viewer.mpi_timeout)?;
+    if let Some(c) = cluster.as_mut().filter(|c| !c.is_root()) {
+        return crate::cluster::serve_view(c, &opts, &tracer, &pool);
     }
-    let log = FrameLog::create(a.viewer.log.as_deref())?;
-    window(&tracer, &pool, opts, &name, log)
+    let source = cluster.as_mut().map(|c| crate::cluster::frame_source(c, &tracer, &pool));
+    let res = match &a.script {
+        Some(script) => {
+            if !a.budgeted {
+                opts.frame_budget = None;
+            }
+            let out = a.out.as_deref().expect("clap requires --out with --script");
+            replay(&tracer, &pool, opts, source, script, out, FrameLog::create(a.viewer.log.as_deref())?)
+        }
+        None => window(&tracer, &pool, opts, source, &name, FrameLog::create(a.viewer.log.as_deref())?),
+    };
+    if let Some(c) = cluster {
+        crate::cluster::finish(c, "the view ended");
+    }
+    res
 }
 
 /// The window loop: input to the core, a step, the display to the window; P saves the picture
 /// beside the working folder, Escape or closing the window ends it.
-fn window(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, name: &str, mut log: FrameLog) -> Result<()> {
+fn window<'t>(
+    tracer: &'t Tracer,
+    pool: &'t rayon::ThreadPool,
+    opts: ViewOptions,
+    source: Option<FrameSource<'t>>,
+    name: &str,
+    mut log: FrameLog,
+) -> Result<()> {
     let (w, h) = (opts.width as usize, opts.height as usize);
     let title = format!("megaray - {name}");
     let mut win = minifb::Window::new(&title, w, h, minifb::WindowOptions { resize: true, ..Default::default() })
         .map_err(|e| {
             anyhow::anyhow!("cannot open a window ({e}); is DISPLAY set? (megaray serve shows the view in a browser)")
         })?;
-    let mut view = ViewCore::new(tracer, pool, opts);
+    let mut view = with_source(ViewCore::new(tracer, pool, opts), source);
     let stem = name.trim_end_matches(".mray").to_string();
     let mut mouse: Option<(f32, f32)> = None;
     let mut buf: Vec<u32> = Vec::new();
@@ -221,7 +244,10 @@ fn window(tracer: &Tracer, pool: &rayon::ThreadPool, opts: ViewOptions, name: &s
             std::thread::sleep(Duration::from_millis(15));
         }
     }
-    Ok(())
+    match view.error() {
+        Some(e) => bail!("{e}"),
+        None => Ok(()),
+    }
 }
 
 /// The window's input since its last update, to the core: keys that went down and up (a tap
@@ -303,10 +329,11 @@ impl FrameLog {
 
 /// `--script`: the script's events and frames, each frame's picture written to `out` and its
 /// pose and statistics to `out/frames.jsonl`; a screenshot key saves `out/screenshot-N.png`.
-fn replay(
-    tracer: &Tracer,
-    pool: &rayon::ThreadPool,
+fn replay<'t>(
+    tracer: &'t Tracer,
+    pool: &'t rayon::ThreadPool,
     opts: ViewOptions,
+    source: Option<FrameSource<'t>>,
     script: &Path,
     out: &Path,
     mut flog: FrameLog,
@@ -314,7 +341,7 @@ fn replay(
     let text = std::fs::read_to_string(script).with_context(|| format!("{}: cannot read", script.display()))?;
     let script = Script::parse(&text).map_err(|e| anyhow::anyhow!("{}: {e}", script.display()))?;
     std::fs::create_dir_all(out).with_context(|| format!("{}: cannot create the folder", out.display()))?;
-    let mut view = ViewCore::new(tracer, pool, opts);
+    let mut view = with_source(ViewCore::new(tracer, pool, opts), source);
     let mut log = String::new();
     let mut n = 0u64;
     for step in &script.steps {
@@ -344,10 +371,21 @@ fn replay(
             break;
         }
     }
+    if let Some(e) = view.error() {
+        bail!("{e}");
+    }
     let jsonl = out.join("frames.jsonl");
     std::fs::write(&jsonl, log).with_context(|| format!("{}: cannot write", jsonl.display()))?;
     eprintln!("{n} frames written to {}", out.display());
     Ok(())
+}
+
+/// `view` with its frames from `source`, if there is one.
+pub(crate) fn with_source<'t, 's>(view: ViewCore<'t, 's>, source: Option<FrameSource<'t>>) -> ViewCore<'t, 's> {
+    match source {
+        Some(s) => view.with_frame_source(s),
+        None => view,
+    }
 }
 
 /// Starts `opts`'s view at `scene`'s own camera (a pbrt or glTF scene's), with its field of

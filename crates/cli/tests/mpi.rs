@@ -156,3 +156,68 @@ fn a_rank_with_another_scene_file_refuses_to_start() {
     assert!(ours[0].contains("rank 1's scene file differs from rank 0's"), "{err}");
     assert!(!Path::new(&png).exists());
 }
+
+#[test]
+fn a_view_script_across_two_ranks_gives_the_frames_of_one_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let script = dir.path().join("s.txt");
+    // Still frames, a move, another shader, the sky on: each reaches rank 1 with its frame.
+    let text = "frames 2\nkey forward down\nframes 2\nkey forward up\nframes 1\nkey nextshader down\nkey nextshader up\nframes 2\nkey togglesky down\nkey togglesky up\nframes 2\n";
+    std::fs::write(&script, text).unwrap();
+    let script = script.to_string_lossy().into_owned();
+    let out = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    let common = ["--script", &script, "--res", "96x64", "--threads", "1", "-q"];
+    let one = out("one");
+    let mut args = vec!["view", &s, "--out", &one];
+    args.extend(common);
+    let (code, _, err) = run(&args);
+    assert_eq!(code, 0, "{err}");
+    let bin = bin();
+    let two = out("two");
+    let mut args = vec!["-n", "2", bin.to_str().unwrap(), "view", &s, "--out", &two];
+    args.extend(common);
+    let o = mpirun(&args).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for k in 1..=9 {
+        let f = format!("frame-{k:05}.png");
+        let a = std::fs::read(Path::new(&one).join(&f)).unwrap();
+        let b = std::fs::read(Path::new(&two).join(&f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(a == b, "{f} differs");
+    }
+}
+
+#[test]
+fn serve_across_two_ranks_sends_frames_to_a_page() {
+    use std::io::{BufRead, BufReader};
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let bin = bin();
+    let args = ["-n", "2", bin.to_str().unwrap(), "serve", &s, "--bind", "127.0.0.1:0", "--threads", "1"];
+    let mut child = mpirun(&args).spawn().unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let addr = loop {
+        let line = lines.next().expect("serve ended before listening").unwrap();
+        if let Some(rest) = line.split("http://").nth(1) {
+            break rest.split('/').next().unwrap().to_string();
+        }
+    };
+    let log = std::thread::spawn(move || lines.map_while(Result::ok).collect::<Vec<_>>().join("\n"));
+    let (mut ws, _) = tungstenite::connect(format!("ws://{addr}/ws")).unwrap();
+    ws.send(tungstenite::Message::text(r#"{"k":"size","w":64,"h":48}"#)).unwrap();
+    let (mut pictures, start) = (0, Instant::now());
+    while pictures < 4 && start.elapsed() < Duration::from_secs(60) {
+        if let tungstenite::Message::Binary(b) = ws.read().unwrap() {
+            // A JPEG of the view.
+            assert_eq!(&b[..2], &[0xff, 0xd8]);
+            pictures += 1;
+            ws.send(tungstenite::Message::text(r#"{"k":"ack"}"#)).unwrap();
+        }
+    }
+    // Kill the launcher: it ends both ranks.
+    let _ = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+    let _ = child.wait();
+    let log = log.join().unwrap();
+    assert_eq!(pictures, 4, "{log}");
+    assert!(!log.contains("error"), "{log}");
+}

@@ -2,10 +2,10 @@
 //! workers' service loop.
 
 use std::collections::VecDeque;
-use std::sync::mpsc;
+use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
-use megaray_render::{Frame, Rect, Renderer};
+use megaray_render::{Environment, Frame, Rect, Renderer};
 use megaray_trace::jobs::JobStats;
 use megaray_trace::Tracer;
 
@@ -160,15 +160,36 @@ impl<T: Transport> Cluster<T> {
     }
 
     /// On a worker: renders what the root asks for, frame after frame, until the root ends
-    /// the session. Each frame's camera and level-of-detail error come from the root.
-    /// Returns the frames rendered.
-    pub fn serve(&mut self, r: &mut Renderer, tracer: &Tracer, pool: &rayon::ThreadPool) -> Result<u32, ClusterError> {
+    /// the session. Each frame's camera, level-of-detail error, shader and AOVs come from
+    /// the root, and whether it is lit by `env` (the environment this rank made from the
+    /// same arguments as the root). Returns the frames rendered.
+    pub fn serve(
+        &mut self,
+        r: &mut Renderer,
+        env: Option<Arc<Environment>>,
+        tracer: &Tracer,
+        pool: &rayon::ThreadPool,
+    ) -> Result<u32, ClusterError> {
         assert!(!self.is_root(), "the root renders with render_frame");
         let mut frames = 0;
         loop {
             match self.wait_root(None)? {
-                ToWorker::Frame { frame, lod_error, camera } => {
+                ToWorker::Frame { frame, lod_error, camera, shader, aovs, env: lit } => {
+                    if r.settings.shader != shader || r.has_environment() != lit {
+                        let mut s = r.settings.clone();
+                        s.shader = shader;
+                        let fresh = Renderer::new(s, &tracer.scene().header().bounds);
+                        *r = match (lit, &env) {
+                            (false, _) => fresh,
+                            (true, Some(env)) => fresh.with_environment(env.clone()),
+                            (true, None) => {
+                                let what = "a frame lit by an environment this rank has not got".into();
+                                return Err(ClusterError::Protocol { rank: 0, what });
+                            }
+                        };
+                    }
                     r.settings.camera = camera;
+                    r.settings.aovs = aovs;
                     tracer.set_lod_error(lod_error);
                     let mut link = TransportLink(&self.t);
                     let silence = 2 * self.opts.timeout + Duration::from_secs(10);
@@ -218,7 +239,10 @@ impl<T: Transport> Cluster<T> {
             comm: FrameComm { tiles: tiles.len() as u64, ..FrameComm::default() },
             total_threads: (0..self.t.size()).filter(|&p| !self.lost[p]).map(|p| self.threads[p]).sum(),
         };
-        let (tag, b) = ToWorker::Frame { frame, lod_error: tracer.lod_error(), camera: cam }.encode();
+        let s = &r.settings;
+        let (shader, aovs, env) = (s.shader, s.aovs, r.has_environment());
+        let (tag, b) =
+            ToWorker::Frame { frame, lod_error: tracer.lod_error(), camera: cam, shader, aovs, env }.encode();
         for p in 1..self.t.size() {
             if !self.lost[p] {
                 self.t.send(p, tag, &b);
@@ -349,10 +373,12 @@ impl Queue {
                     continue;
                 }
                 lost[p] = true;
-                eprintln!(
-                    "megaray: rank {p} sent nothing for {:.0} s while rendering; its tiles go to the other ranks",
-                    peer.since.elapsed().as_secs_f64()
+                let secs = peer.since.elapsed().as_secs_f64();
+                // One write: the line stays whole among other ranks' output.
+                let line = format!(
+                    "megaray: rank {p} sent nothing for {secs:.0} s while rendering; its tiles go to the other ranks\n"
                 );
+                eprint!("{line}");
                 for batch in peer.outstanding.drain(..).rev() {
                     batch.into_iter().rev().for_each(|t| self.queue.push_front(t));
                 }

@@ -3,7 +3,7 @@
 //! a panic or an allocation sized by an unchecked count).
 
 use megaray_base::{Camera, Vec3};
-use megaray_render::{Piece, Rect};
+use megaray_render::{Builtin, Piece, Rect};
 use megaray_trace::jobs::JobStats;
 
 use crate::ClusterError;
@@ -30,8 +30,9 @@ pub enum ToWorker {
     /// Whether to start: `None`, or the rank whose scene file differs.
     Start(Option<u32>),
     /// Frame `frame` begins, seen by `camera`, with `lod_error` pixels allowed to levels of
-    /// detail.
-    Frame { frame: u32, lod_error: f32, camera: Camera },
+    /// detail, shaded by `shader` (with AOVs when `aovs`, under the environment map when
+    /// `env`): what a view changes from frame to frame.
+    Frame { frame: u32, lod_error: f32, camera: Camera, shader: Builtin, aovs: bool, env: bool },
     /// Tiles of frame `frame` to render; none ends one of the worker's lanes.
     Work { frame: u32, rects: Vec<Rect> },
     /// The session ends.
@@ -126,13 +127,15 @@ impl ToWorker {
                 o.u32(differs.map_or(u32::MAX, |r| r));
                 START
             }
-            ToWorker::Frame { frame, lod_error, camera: c } => {
+            ToWorker::Frame { frame, lod_error, camera: c, shader, aovs, env } => {
                 o.u32(*frame);
                 o.f32(*lod_error);
                 [c.eye, c.fwd, c.right, c.up].into_iter().for_each(|v| o.vec3(v));
                 o.f32(c.tan_half);
                 o.u32(c.width);
                 o.u32(c.height);
+                o.u32(Builtin::ALL.iter().position(|(_, b)| b == shader).unwrap_or(0) as u32);
+                o.u32(*aovs as u32 | (*env as u32) << 1);
                 FRAME
             }
             ToWorker::Work { frame, rects } => {
@@ -155,7 +158,11 @@ impl ToWorker {
                 let (frame, lod_error) = (i.u32()?, i.f32()?);
                 let (eye, fwd, right, up) = (i.vec3()?, i.vec3()?, i.vec3()?, i.vec3()?);
                 let camera = Camera { eye, fwd, right, up, tan_half: i.f32()?, width: i.u32()?, height: i.u32()? };
-                ToWorker::Frame { frame, lod_error, camera }
+                let shader = Builtin::ALL.get(i.u32()? as usize).map(|(_, b)| *b);
+                let shader =
+                    shader.ok_or_else(|| ClusterError::Protocol { rank: from, what: "an unknown shader".into() })?;
+                let flags = i.u32()?;
+                ToWorker::Frame { frame, lod_error, camera, shader, aovs: flags & 1 != 0, env: flags & 2 != 0 }
             }
             WORK => {
                 let frame = i.u32()?;
@@ -289,7 +296,8 @@ mod tests {
         for m in [
             ToWorker::Start(None),
             ToWorker::Start(Some(3)),
-            ToWorker::Frame { frame: 7, lod_error: 1.5, camera },
+            ToWorker::Frame { frame: 7, lod_error: 1.5, camera, shader: Builtin::Env, aovs: true, env: false },
+            ToWorker::Frame { frame: 8, lod_error: 0.0, camera, shader: Builtin::Ao, aovs: false, env: true },
             ToWorker::Work { frame: 2, rects: vec![Rect { x0: 0, y0: 32, x1: 32, y1: 64 }; 3] },
             ToWorker::Work { frame: 2, rects: Vec::new() },
             ToWorker::Stop,

@@ -72,7 +72,7 @@ fn frames_equal_one_process_bit_for_bit() {
                     let tracer = if t.rank() == 1 { Tracer::paged(&pager) } else { Tracer::new(scene) };
                     let mut r = renderer(scene, aovs);
                     let mut c = Cluster::join(t, checksum, 1, opts()).unwrap();
-                    assert_eq!(c.serve(&mut r, &tracer, &pool()).unwrap(), 3);
+                    assert_eq!(c.serve(&mut r, None, &tracer, &pool()).unwrap(), 3);
                 });
             }
             let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
@@ -151,7 +151,7 @@ fn a_silent_rank_loses_its_tiles_and_the_frame_is_still_exact() {
         s.spawn(|| {
             let mut r = renderer(&scene, false);
             let mut c = Cluster::join(two, checksum, 1, opts()).unwrap();
-            c.serve(&mut r, &Tracer::new(&scene), &pool()).unwrap();
+            c.serve(&mut r, None, &Tracer::new(&scene), &pool()).unwrap();
         });
         let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
         let p = pool();

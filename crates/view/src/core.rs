@@ -12,8 +12,8 @@ use std::time::{Duration, Instant};
 
 use megaray_base::Aabb;
 use megaray_render::{
-    render_frame_with, Accumulator, Builtin, Environment, FrameOptions, Image, ImageError, LodGovernor, RenderSettings,
-    Renderer, ToneMap,
+    render_frame_with, Accumulator, Builtin, Environment, Frame, FrameOptions, Image, ImageError, LodGovernor,
+    RenderSettings, Renderer, ToneMap,
 };
 use megaray_trace::Tracer;
 
@@ -108,6 +108,12 @@ pub struct ViewStats {
     pub moving: bool,
 }
 
+/// Where a view's frames come from instead of its own pool: a function of the renderer (the
+/// frame's camera, shader, AOVs) and the frame index, such as a cluster of processes
+/// (`megaray-cluster`). Its frames are whole and exact (no frame budget); an error ends the
+/// view ([`ViewCore::error`]).
+pub type FrameSource<'t> = Box<dyn FnMut(&Renderer, u32) -> Result<Frame, String> + 't>;
+
 /// An interactive view of a scene (see the module documentation).
 pub struct ViewCore<'t, 's> {
     tracer: &'t Tracer<'s>,
@@ -139,6 +145,8 @@ pub struct ViewCore<'t, 's> {
     info: bool,
     quit: bool,
     screenshots: u32,
+    source: Option<FrameSource<'t>>,
+    error: Option<String>,
 }
 
 impl<'t, 's> ViewCore<'t, 's> {
@@ -174,10 +182,26 @@ impl<'t, 's> ViewCore<'t, 's> {
             info: true,
             quit: false,
             screenshots: 0,
+            source: None,
+            error: None,
             opts: ViewOptions { width: w, height: h, ..opts },
         };
         v.rebuild_renderer();
         v
+    }
+
+    /// Frames from `source` from now on (see [`FrameSource`]): whole, exact, at full
+    /// resolution, as with no frame budget.
+    pub fn with_frame_source(mut self, source: FrameSource<'t>) -> ViewCore<'t, 's> {
+        self.opts.frame_budget = None;
+        self.source = Some(source);
+        self.rebuild_renderer();
+        self
+    }
+
+    /// Why the frame source failed, if it did (the view then asks to quit).
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
     }
 
     /// The renderer for the current shader, sky and size.
@@ -324,7 +348,16 @@ impl<'t, 's> ViewCore<'t, 's> {
             stand_in: self.opts.frame_budget.is_some(),
         };
         let index = if moving { 0 } else { self.acc.frames() };
-        let frame = self.pool.install(|| render_frame_with(&self.renderer, self.tracer, index, &opts));
+        let frame = match &mut self.source {
+            Some(source) => match source(&self.renderer, index) {
+                Ok(f) => f,
+                Err(e) => {
+                    (self.error, self.quit) = (Some(e), true);
+                    return false;
+                }
+            },
+            None => self.pool.install(|| render_frame_with(&self.renderer, self.tracer, index, &opts)),
+        };
         let secs = t0.elapsed().as_secs_f64().max(1e-6);
         self.governor.after_frame(self.tracer);
         if (rw, rh) == (w, h) {

@@ -32,5 +32,5 @@ mod input;
 mod overlay;
 
 pub use crate::camera::{FlyCamera, Pose};
-pub use crate::core::{ViewCore, ViewOptions, ViewStats};
+pub use crate::core::{FrameSource, ViewCore, ViewOptions, ViewStats};
 pub use crate::input::{help_lines, Event, Key, Script, ScriptError, Step};
