@@ -10,7 +10,7 @@ use megaray_trace::jobs::JobStats;
 use megaray_trace::Tracer;
 
 use crate::wire::{ToRoot, ToWorker};
-use crate::worker::{run_frame, Link};
+use crate::worker::{relay, run_frame, ChannelLink};
 use crate::{ClusterError, ClusterOptions, Transport, LANES};
 
 /// What one frame cost in communication, seen from the root.
@@ -191,9 +191,8 @@ impl<T: Transport> Cluster<T> {
                     r.settings.camera = camera;
                     r.settings.aovs = aovs;
                     tracer.set_lod_error(lod_error);
-                    let mut link = TransportLink(&self.t);
                     let silence = 2 * self.opts.timeout + Duration::from_secs(10);
-                    run_frame(&mut link, r, tracer, pool, frame, self.opts.poll, silence)?;
+                    relay(&self.t, r, tracer, pool, frame, self.opts.poll, silence)?;
                     frames += 1;
                 }
                 ToWorker::Stop => return Ok(frames),
@@ -255,8 +254,8 @@ impl<T: Transport> Cluster<T> {
         let (poll, timeout) = (self.opts.poll, self.opts.timeout);
         let (res, busy) = std::thread::scope(|s| {
             let local = s.spawn(move || {
-                let mut link = ChannelLink { tx: local_tx, rx: local_rx };
-                run_frame(&mut link, r, tracer, pool, frame, poll, Duration::MAX)
+                let mut link = ChannelLink { tx: local_tx, rx: local_rx, rank: 0 };
+                pool.install(|| run_frame(&mut link, r, tracer, frame, poll, Duration::MAX))
             });
             let mut send = Sender { t: &self.t, local: Some(&to_local), threads: &self.threads };
             let res = q.dispatch(&mut send, &from_local, &mut self.lost, frame, poll, timeout);
@@ -340,6 +339,8 @@ impl Queue {
                 }
             }
         }
+        // The sleep when nothing came: from `poll`, doubling while nothing comes, to 16x.
+        let mut nap = poll;
         while self.done < total {
             let mut got = false;
             while let Some((from, tag, bytes)) = send.t.try_recv() {
@@ -392,8 +393,11 @@ impl Queue {
                     }
                 }
             }
-            if !got {
-                std::thread::sleep(poll);
+            if got {
+                nap = poll;
+            } else {
+                std::thread::sleep(nap);
+                nap = (nap * 2).min(poll * 16);
             }
         }
         // Every tile is back: close every lane.
@@ -461,49 +465,5 @@ impl Queue {
         self.jobs.suspended += stats.suspended;
         self.jobs.wait_secs += stats.wait_secs;
         Ok(())
-    }
-}
-
-/// A worker's link over the transport.
-struct TransportLink<'a, T: Transport>(&'a T);
-
-impl<T: Transport> Link for TransportLink<'_, T> {
-    fn send(&mut self, m: ToRoot) {
-        let (tag, b) = m.encode();
-        self.0.send(0, tag, &b);
-    }
-    fn try_recv(&mut self) -> Result<Option<ToWorker>, ClusterError> {
-        match self.0.try_recv() {
-            Some((0, tag, bytes)) => ToWorker::decode(0, tag, &bytes).map(Some),
-            Some((from, ..)) => Err(ClusterError::Protocol { rank: from, what: "a message to a worker".into() }),
-            None => Ok(None),
-        }
-    }
-    fn rank(&self) -> usize {
-        self.0.rank()
-    }
-}
-
-/// The root's render thread's link: channels.
-struct ChannelLink {
-    tx: mpsc::Sender<ToRoot>,
-    rx: mpsc::Receiver<ToWorker>,
-}
-
-impl Link for ChannelLink {
-    fn send(&mut self, m: ToRoot) {
-        let _ = self.tx.send(m);
-    }
-    fn try_recv(&mut self) -> Result<Option<ToWorker>, ClusterError> {
-        match self.rx.try_recv() {
-            Ok(m) => Ok(Some(m)),
-            Err(mpsc::TryRecvError::Empty) => Ok(None),
-            Err(mpsc::TryRecvError::Disconnected) => {
-                Err(ClusterError::Protocol { rank: 0, what: "the root stopped its own render thread".into() })
-            }
-        }
-    }
-    fn rank(&self) -> usize {
-        0
     }
 }

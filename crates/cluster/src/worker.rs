@@ -1,15 +1,18 @@
 //! A rank's side of a frame: take batches of tiles, render them, send them back, until the
-//! root has closed every lane. The same loop runs on the other ranks (over the transport)
-//! and on the root's own render thread (over channels).
+//! root has closed every lane. The loop runs inside the rank's thread pool, on a thread of
+//! its own (so that a batch waiting in its queue starts at once, with no hand-over to the
+//! pool), talking over channels: on the root to the queue, on the other ranks to the thread
+//! that talks MPI ([`relay`]).
 
 use std::collections::VecDeque;
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use megaray_render::{render_pieces, Renderer};
 use megaray_trace::Tracer;
 
 use crate::wire::{ToRoot, ToWorker};
-use crate::{ClusterError, LANES};
+use crate::{ClusterError, Transport, LANES};
 
 /// A worker's line to the root.
 pub(crate) trait Link {
@@ -28,12 +31,11 @@ pub(crate) struct WorkerFrame {
 
 /// Runs frame `frame` on this worker: renders each batch that arrives, sends it back, and
 /// returns when [`LANES`] empty batches have closed its lanes. Gives up after `silence`
-/// without a message from the root.
+/// without a message from the root. Call it inside the rank's pool.
 pub(crate) fn run_frame(
     link: &mut dyn Link,
     r: &Renderer,
     tracer: &Tracer,
-    pool: &rayon::ThreadPool,
     frame: u32,
     poll: Duration,
     silence: Duration,
@@ -61,7 +63,7 @@ pub(crate) fn run_frame(
         }
         if let Some(rects) = queue.pop_front() {
             let t = Instant::now();
-            let (pieces, stats) = pool.install(|| render_pieces(r, tracer, frame, &rects));
+            let (pieces, stats) = render_pieces(r, tracer, frame, &rects);
             out.busy += t.elapsed().as_secs_f64();
             link.send(ToRoot::Done { frame, pieces, stats });
             continue;
@@ -74,4 +76,91 @@ pub(crate) fn run_frame(
         }
         std::thread::sleep(poll);
     }
+}
+
+/// A render thread's link: channels.
+pub(crate) struct ChannelLink {
+    pub tx: mpsc::Sender<ToRoot>,
+    pub rx: mpsc::Receiver<ToWorker>,
+    pub rank: usize,
+}
+
+impl Link for ChannelLink {
+    fn send(&mut self, m: ToRoot) {
+        let _ = self.tx.send(m);
+    }
+    fn try_recv(&mut self) -> Result<Option<ToWorker>, ClusterError> {
+        match self.rx.try_recv() {
+            Ok(m) => Ok(Some(m)),
+            Err(mpsc::TryRecvError::Empty) => Ok(None),
+            Err(mpsc::TryRecvError::Disconnected) => {
+                Err(ClusterError::Protocol { rank: 0, what: "the frame's messages stopped".into() })
+            }
+        }
+    }
+    fn rank(&self) -> usize {
+        self.rank
+    }
+}
+
+/// Runs frame `frame` on a worker rank: [`run_frame`] on a thread in `pool`, while this
+/// thread (the one that talks MPI) relays the root's batches to it and its pieces back,
+/// until the root has closed every lane and the last pieces have gone.
+pub(crate) fn relay<T: Transport>(
+    t: &T,
+    r: &Renderer,
+    tracer: &Tracer,
+    pool: &rayon::ThreadPool,
+    frame: u32,
+    poll: Duration,
+    silence: Duration,
+) -> Result<WorkerFrame, ClusterError> {
+    let (to_render, rx) = mpsc::channel();
+    let (tx, from_render) = mpsc::channel();
+    let rank = t.rank();
+    std::thread::scope(|s| {
+        let render = s.spawn(move || {
+            let mut link = ChannelLink { tx, rx, rank };
+            pool.install(|| run_frame(&mut link, r, tracer, frame, poll, silence))
+        });
+        let pump = || -> Result<(), ClusterError> {
+            let (mut open, mut nap) = (LANES, poll);
+            loop {
+                let mut got = false;
+                // This frame's messages only: after its lanes close comes the next frame's.
+                while open > 0 {
+                    let Some((from, tag, bytes)) = t.try_recv() else { break };
+                    got = true;
+                    if from != 0 {
+                        return Err(ClusterError::Protocol { rank: from, what: "a message to a worker".into() });
+                    }
+                    let m = ToWorker::decode(0, tag, &bytes)?;
+                    if matches!(&m, ToWorker::Work { rects, .. } if rects.is_empty()) {
+                        open -= 1;
+                    }
+                    let _ = to_render.send(m);
+                }
+                let done = render.is_finished();
+                while let Ok(m) = from_render.try_recv() {
+                    got = true;
+                    let (tag, b) = m.encode();
+                    t.send(0, tag, &b);
+                }
+                if done {
+                    return Ok(());
+                }
+                if got {
+                    nap = poll;
+                } else {
+                    std::thread::sleep(nap);
+                    nap = (nap * 2).min(poll * 16);
+                }
+            }
+        };
+        let res = pump();
+        // An error here leaves the render thread without messages: closing its channel ends it.
+        drop(to_render);
+        let frame = render.join().expect("a render thread panicked");
+        res.and(frame)
+    })
 }
