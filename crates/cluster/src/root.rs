@@ -155,7 +155,7 @@ impl<T: Transport> Cluster<T> {
                 return Err(ClusterError::RootSilent { rank: self.t.rank(), secs: start.elapsed().as_secs_f64() });
             }
             std::thread::sleep(nap);
-            nap = (nap * 2).min(Duration::from_millis(5));
+            nap = (nap * 2).min(Duration::from_micros(500));
         }
     }
 
@@ -397,7 +397,7 @@ impl Queue {
                 nap = poll;
             } else {
                 std::thread::sleep(nap);
-                nap = (nap * 2).min(poll * 16);
+                nap = (nap * 2).min(poll * 4);
             }
         }
         // Every tile is back: close every lane.

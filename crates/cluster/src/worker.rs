@@ -153,7 +153,7 @@ pub(crate) fn relay<T: Transport>(
                     nap = poll;
                 } else {
                     std::thread::sleep(nap);
-                    nap = (nap * 2).min(poll * 16);
+                    nap = (nap * 2).min(poll * 4);
                 }
             }
         };
