@@ -1,7 +1,8 @@
 //! The MPI [`Transport`] (rsmpi over the system's MPI), for `mpirun -n N megaray ...`.
 //! MPI is initialised with `MPI_THREAD_FUNNELED`: only the thread that made the transport
-//! calls MPI (the root's render thread talks to it over channels). Receives probe without
-//! blocking (`MPI_Improbe`), so that a waiting rank sleeps instead of spinning on a core.
+//! calls MPI (the render threads talk to it over channels). Receives probe without blocking
+//! (`MPI_Improbe`) and sends are tested (`MPI_Isend`, `MPI_Test`), so that a waiting rank
+//! sleeps instead of spinning on a core.
 
 use mpi::environment::Universe;
 use mpi::point_to_point::MatchedReceiveVec;
@@ -47,8 +48,22 @@ impl Transport for MpiTransport {
     fn size(&self) -> usize {
         self.size
     }
+    /// A non-blocking send, tested until done with sleeps between: a blocking send of a
+    /// large message spins in MPI's progress loop until the receiver takes it (a tenth of a
+    /// worker's time, measured), on a core a render thread could use.
     fn send(&self, to: usize, tag: Tag, bytes: &[u8]) {
-        self.world.process_at_rank(to as i32).send_with_tag(bytes, tag as i32);
+        mpi::request::scope(|scope| {
+            let mut req = self.world.process_at_rank(to as i32).immediate_send_with_tag(scope, bytes, tag as i32);
+            loop {
+                match req.test() {
+                    Ok(_) => break,
+                    Err(r) => {
+                        req = r;
+                        std::thread::sleep(std::time::Duration::from_micros(50));
+                    }
+                }
+            }
+        });
     }
     fn try_recv(&self) -> Option<(usize, Tag, Vec<u8>)> {
         let probed = self.world.any_process().immediate_matched_probe()?;
