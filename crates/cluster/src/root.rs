@@ -420,7 +420,8 @@ impl Queue {
 
     /// Gives rank `p` its next batch: a share of the tiles left in proportion to its
     /// threads (a quarter of its share, so that batches shrink toward the frame's end),
-    /// at least one tile and at most 8 per thread. With none left, the lane is parked.
+    /// at least one tile and at most 32 per thread (long batches hide the round trip, see
+    /// `docs/PERF.md`). With none left, the lane is parked.
     fn feed<T: Transport>(&mut self, send: &mut Sender<T>, p: usize, frame: u32) {
         if self.queue.is_empty() {
             self.peers[p].parked += 1;
@@ -428,7 +429,7 @@ impl Queue {
         }
         let th = send.threads[p] as usize;
         let share = self.queue.len() * th / (4 * self.total_threads.max(1) as usize);
-        let n = share.clamp(1, 8 * th).min(self.queue.len());
+        let n = share.clamp(1, 32 * th).min(self.queue.len());
         let rects: Vec<Rect> = self.queue.drain(..n).collect();
         let peer = &mut self.peers[p];
         if peer.outstanding.is_empty() {
