@@ -692,7 +692,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     // own share of the tiles over the pool.
     let acc = match cluster.as_mut() {
         Some(c) => {
-            let frame = |i| c.render_frame(&renderer, &tracer, &pool, i);
+            let frame = |i, last| c.render_frame(&renderer, &tracer, &pool, i, last);
             render_progressive_with(&renderer, &tracer, stop, frame, &mut on_frame)?
         }
         None => pool.install(|| render_progressive(&renderer, &tracer, stop, &mut on_frame)),

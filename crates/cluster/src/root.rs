@@ -216,13 +216,15 @@ impl<T: Transport> Cluster<T> {
     /// On the root: renders frame `frame` of `r`'s camera across the ranks (this rank's
     /// share on a thread of its own, over `pool`), equal bit for bit to
     /// `render_frame(r, tracer, frame)` without a deadline. The level-of-detail error in
-    /// force is `tracer`'s, sent to every rank.
+    /// force is `tracer`'s, sent to every rank. `last`, a frame done with, lends its buffers
+    /// ([`Frame::recycle`]).
     pub fn render_frame(
         &mut self,
         r: &Renderer,
         tracer: &Tracer,
         pool: &rayon::ThreadPool,
         frame: u32,
+        last: Option<Frame>,
     ) -> Result<Frame, ClusterError> {
         assert!(self.is_root(), "workers render with serve");
         let start = Instant::now();
@@ -232,7 +234,10 @@ impl<T: Transport> Cluster<T> {
         let mut q = Queue {
             queue: tiles.iter().copied().collect(),
             peers: (0..self.t.size()).map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: start }).collect(),
-            frame: Frame::new(w, h, r.settings.aovs),
+            frame: match last {
+                Some(f) => f.recycle(w, h, r.settings.aovs),
+                None => Frame::new(w, h, r.settings.aovs),
+            },
             jobs: JobStats::default(),
             done: 0,
             comm: FrameComm { tiles: tiles.len() as u64, ..FrameComm::default() },
@@ -362,11 +367,7 @@ impl Queue {
             }
             while let Ok(m) = from_local.try_recv() {
                 got = true;
-                if let ToRoot::Done { pieces, stats, .. } = m {
-                    self.comm.root_tiles += pieces.len() as u64;
-                    self.take(0, pieces, stats)?;
-                    self.feed(send, 0, frame);
-                }
+                self.take_local(send, m, frame)?;
             }
             for p in 1..self.peers.len() {
                 let peer = &mut self.peers[p];
@@ -395,9 +396,30 @@ impl Queue {
             }
             if got {
                 nap = poll;
-            } else {
-                std::thread::sleep(nap);
-                nap = (nap * 2).min(poll * 4);
+                continue;
+            }
+            // Nothing came: wait for this rank's render thread (which ends the wait at once)
+            // or until the other ranks may have sent something. The longer the batches they
+            // hold, the longer until one needs its next: from `poll`, doubling while nothing
+            // comes, to 4x, or 16x while every rank holds a batch of 32 tiles or more.
+            let shortest = (1..self.peers.len())
+                .filter(|&p| !lost[p])
+                .filter_map(|p| self.peers[p].outstanding.back().map(Vec::len))
+                .min()
+                .unwrap_or(0);
+            let most = if shortest >= 32 { 16 } else { 4 };
+            match from_local.recv_timeout(nap) {
+                Ok(m) => {
+                    self.take_local(send, m, frame)?;
+                    nap = poll;
+                }
+                Err(e) => {
+                    // A render thread that has stopped (after an error) cannot end the wait.
+                    if e == mpsc::RecvTimeoutError::Disconnected {
+                        std::thread::sleep(nap);
+                    }
+                    nap = (nap * 2).min(poll * most);
+                }
             }
         }
         // Every tile is back: close every lane.
@@ -406,6 +428,16 @@ impl Queue {
                 self.peers[p].parked -= 1;
                 self.send_counted(send, p, ToWorker::Work { frame, rects: Vec::new() });
             }
+        }
+        Ok(())
+    }
+
+    /// Takes a message from this rank's own render thread.
+    fn take_local<T: Transport>(&mut self, send: &mut Sender<T>, m: ToRoot, frame: u32) -> Result<(), ClusterError> {
+        if let ToRoot::Done { pieces, stats, .. } = m {
+            self.comm.root_tiles += pieces.len() as u64;
+            self.take(0, pieces, stats)?;
+            self.feed(send, 0, frame);
         }
         Ok(())
     }

@@ -17,7 +17,8 @@ use crate::{ClusterError, Transport, LANES};
 /// A worker's line to the root.
 pub(crate) trait Link {
     fn send(&mut self, m: ToRoot);
-    fn try_recv(&mut self) -> Result<Option<ToWorker>, ClusterError>;
+    /// The next message, waiting for one up to `wait` (not at all when zero).
+    fn recv(&mut self, wait: Duration) -> Result<Option<ToWorker>, ClusterError>;
     /// This worker's rank (for errors).
     fn rank(&self) -> usize;
 }
@@ -44,11 +45,14 @@ pub(crate) fn run_frame(
     let mut lanes = LANES;
     let mut queue: VecDeque<Vec<megaray_render::Rect>> = VecDeque::new();
     let mut heard = Instant::now();
+    // How long the next look at the messages may wait: only when there is nothing to render
+    // (a message ends the wait at once).
+    let mut wait = Duration::ZERO;
     loop {
         // Nothing more comes for this frame once every lane is closed (and the channel to
         // the root's render thread is then dropped).
         while lanes > 0 {
-            let Some(m) = link.try_recv()? else { break };
+            let Some(m) = link.recv(std::mem::take(&mut wait))? else { break };
             heard = Instant::now();
             match m {
                 ToWorker::Work { frame: f, rects } if f == frame => match rects.is_empty() {
@@ -74,7 +78,7 @@ pub(crate) fn run_frame(
         if heard.elapsed() > silence {
             return Err(ClusterError::RootSilent { rank: link.rank(), secs: silence.as_secs_f64() });
         }
-        std::thread::sleep(poll);
+        wait = poll * 20;
     }
 }
 
@@ -89,13 +93,15 @@ impl Link for ChannelLink {
     fn send(&mut self, m: ToRoot) {
         let _ = self.tx.send(m);
     }
-    fn try_recv(&mut self) -> Result<Option<ToWorker>, ClusterError> {
-        match self.rx.try_recv() {
+    fn recv(&mut self, wait: Duration) -> Result<Option<ToWorker>, ClusterError> {
+        let got = match wait.is_zero() {
+            true => self.rx.try_recv().map_err(|e| e == mpsc::TryRecvError::Disconnected),
+            false => self.rx.recv_timeout(wait).map_err(|e| e == mpsc::RecvTimeoutError::Disconnected),
+        };
+        match got {
             Ok(m) => Ok(Some(m)),
-            Err(mpsc::TryRecvError::Empty) => Ok(None),
-            Err(mpsc::TryRecvError::Disconnected) => {
-                Err(ClusterError::Protocol { rank: 0, what: "the frame's messages stopped".into() })
-            }
+            Err(false) => Ok(None),
+            Err(true) => Err(ClusterError::Protocol { rank: 0, what: "the frame's messages stopped".into() }),
         }
     }
     fn rank(&self) -> usize {
@@ -124,7 +130,8 @@ pub(crate) fn relay<T: Transport>(
             pool.install(|| run_frame(&mut link, r, tracer, frame, poll, silence))
         });
         let pump = || -> Result<(), ClusterError> {
-            let (mut open, mut nap) = (LANES, poll);
+            // Lanes open, and batches the render thread holds (given and not sent back).
+            let (mut open, mut held, mut nap) = (LANES, 0u32, poll);
             loop {
                 let mut got = false;
                 // This frame's messages only: after its lanes close comes the next frame's.
@@ -135,25 +142,41 @@ pub(crate) fn relay<T: Transport>(
                         return Err(ClusterError::Protocol { rank: from, what: "a message to a worker".into() });
                     }
                     let m = ToWorker::decode(0, tag, &bytes)?;
-                    if matches!(&m, ToWorker::Work { rects, .. } if rects.is_empty()) {
-                        open -= 1;
+                    match &m {
+                        ToWorker::Work { rects, .. } if rects.is_empty() => open -= 1,
+                        _ => held += 1,
                     }
                     let _ = to_render.send(m);
                 }
                 let done = render.is_finished();
-                while let Ok(m) = from_render.try_recv() {
-                    got = true;
+                let back = |m: ToRoot| {
                     let (tag, b) = m.encode();
                     t.send(0, tag, &b);
+                };
+                while let Ok(m) = from_render.try_recv() {
+                    (got, held) = (true, held.saturating_sub(1));
+                    back(m);
                 }
                 if done {
                     return Ok(());
                 }
                 if got {
                     nap = poll;
-                } else {
-                    std::thread::sleep(nap);
-                    nap = (nap * 2).min(poll * 4);
+                    continue;
+                }
+                // Nothing came. While the render thread holds a batch beyond the one it
+                // renders (or the lanes are closed), the root has nothing urgent to say:
+                // wait for the render thread alone. Otherwise look at MPI again soon.
+                let wait = if open == 0 || held >= 2 { poll * 20 } else { nap };
+                nap = (nap * 2).min(poll * 4);
+                match from_render.recv_timeout(wait) {
+                    Ok(m) => {
+                        (nap, held) = (poll, held.saturating_sub(1));
+                        back(m);
+                    }
+                    Err(mpsc::RecvTimeoutError::Timeout) => {}
+                    // The render thread has ended: `is_finished` says so next time round.
+                    Err(mpsc::RecvTimeoutError::Disconnected) => std::thread::yield_now(),
                 }
             }
         };

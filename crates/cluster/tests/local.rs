@@ -79,7 +79,7 @@ fn frames_equal_one_process_bit_for_bit() {
             let p = pool();
             let lost = as_root(&mut c, |c| {
                 for (f, want) in expected.iter().enumerate() {
-                    let got = c.render_frame(&one, &tracer, &p, f as u32).unwrap();
+                    let got = c.render_frame(&one, &tracer, &p, f as u32, None).unwrap();
                     assert_eq!(bits(&got), bits(want), "frame {f} aovs {aovs}");
                     assert_eq!(
                         (got.depth.clone(), got.normal.clone(), got.albedo.clone()),
@@ -156,11 +156,11 @@ fn a_silent_rank_loses_its_tiles_and_the_frame_is_still_exact() {
         let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
         let p = pool();
         let lost = as_root(&mut c, |c| {
-            let got = c.render_frame(&r, &tracer, &p, 0).unwrap();
+            let got = c.render_frame(&r, &tracer, &p, 0, None).unwrap();
             assert_eq!(bits(&got), bits(&want));
             assert_eq!(c.lost(), vec![1]);
             // The next frame goes on without it.
-            let got = c.render_frame(&r, &tracer, &p, 1).unwrap();
+            let got = c.render_frame(&r, &tracer, &p, 1, None).unwrap();
             assert_eq!(bits(&got), bits(&pool().install(|| render_frame(&r, &tracer, 1))));
         });
         assert_eq!(lost, vec![1]);

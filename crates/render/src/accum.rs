@@ -294,17 +294,18 @@ pub fn render_progressive(
     stop: Stop,
     on_frame: impl FnMut(&Accumulator),
 ) -> Accumulator {
-    let frame = |i| Ok::<_, std::convert::Infallible>(render_frame(r, tracer, i));
+    let frame = |i, _| Ok::<_, std::convert::Infallible>(render_frame(r, tracer, i));
     render_progressive_with(r, tracer, stop, frame, on_frame).unwrap_or_else(|e| match e {})
 }
 
-/// [`render_progressive`] with frames made by `frame` (frame index -> frame), which may fail
-/// (a frame shared between processes): the first error ends the run.
+/// [`render_progressive`] with frames made by `frame` (frame index, the last frame made
+/// if any, to reuse its buffers -> frame), which may fail (a frame shared between
+/// processes): the first error ends the run.
 pub fn render_progressive_with<E>(
     r: &Renderer,
     tracer: &Tracer,
     stop: Stop,
-    mut frame: impl FnMut(u32) -> Result<Frame, E>,
+    mut frame: impl FnMut(u32, Option<Frame>) -> Result<Frame, E>,
     mut on_frame: impl FnMut(&Accumulator),
 ) -> Result<Accumulator, E> {
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
@@ -316,9 +317,11 @@ pub fn render_progressive_with<E>(
         (None, Some(_)) => u32::MAX,
         (None, None) => 1,
     };
+    let mut last = None;
     while acc.frames() < max_frames {
-        let f = frame(acc.frames())?;
+        let f = frame(acc.frames(), last.take())?;
         acc.add_frame(&f);
+        last = Some(f);
         governor.after_frame(tracer);
         on_frame(&acc);
         if stop.time.is_some_and(|t| start.elapsed() >= t) {
