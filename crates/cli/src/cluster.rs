@@ -57,7 +57,12 @@ pub(crate) fn session(scene: &Scene, threads: usize, timeout_secs: f64) -> Resul
         ClusterOptions { timeout: std::time::Duration::from_secs_f64(timeout_secs), ..ClusterOptions::default() };
     match Cluster::join(t, scene.header().header_checksum, threads, opts) {
         Ok(c) => Ok(Some(c)),
-        Err(ClusterError::Refused(_)) => Err(Quiet.into()),
+        Err(ClusterError::Refused(_)) => {
+            // Rank 0 says why. A launcher ends the job when the first rank exits, which could
+            // cut rank 0 off before its line: let it go first.
+            std::thread::sleep(std::time::Duration::from_secs(2));
+            Err(Quiet.into())
+        }
         Err(e) => Err(e.into()),
     }
 }
@@ -142,7 +147,7 @@ pub(crate) fn frame_source<'t>(
     tracer: &'t megaray_trace::Tracer,
     pool: &'t rayon::ThreadPool,
 ) -> megaray_view::FrameSource<'t> {
-    Box::new(move |r, i| c.render_frame(r, tracer, pool, i, None).map_err(|e| e.to_string()))
+    Box::new(move |r, i| c.render_frame(r, tracer, pool, i, None, false).map_err(|e| e.to_string()))
 }
 
 /// A frame a page of `serve` asks of rank 0's main thread (the one that talks MPI).
@@ -191,6 +196,6 @@ pub(crate) fn serve_requests(
         }
         let r = last.as_mut().expect("made above");
         r.settings = req.settings;
-        let _ = req.reply.send(c.render_frame(r, tracer, pool, req.index, None).map_err(|e| e.to_string()));
+        let _ = req.reply.send(c.render_frame(r, tracer, pool, req.index, None, false).map_err(|e| e.to_string()));
     }
 }

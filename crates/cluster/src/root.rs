@@ -45,6 +45,19 @@ pub struct Cluster<T: Transport> {
     pub last: FrameComm,
     /// All frames' communication so far (at the root).
     pub total: FrameComm,
+    /// The next frame, begun on the other ranks (at the root).
+    ahead: Option<Ahead>,
+}
+
+/// A frame begun on the other ranks while the caller was busy with the one before
+/// ([`Cluster::render_frame`] with `next`): its queue, and its message, to check that the
+/// call for it asks for the same frame.
+struct Ahead {
+    frame: u32,
+    message: (crate::Tag, Vec<u8>),
+    q: Queue,
+    /// Width, height, AOVs.
+    size: (u32, u32, bool),
 }
 
 /// The root's view of one rank during a frame.
@@ -72,6 +85,7 @@ impl<T: Transport> Cluster<T> {
             opts,
             last: FrameComm::default(),
             total: FrameComm::default(),
+            ahead: None,
         };
         if c.t.rank() != 0 {
             let (tag, b) = ToRoot::Hello { checksum, threads: threads as u32 }.encode();
@@ -204,6 +218,11 @@ impl<T: Transport> Cluster<T> {
     /// On the root: ends the session (the other ranks' [`Cluster::serve`] return). Returns
     /// the ranks lost; if there are any, the job can only end by [`Transport::abort`].
     pub fn finish(&mut self) -> Vec<usize> {
+        if let Some(a) = self.ahead.take() {
+            // A frame begun and never asked for: the other ranks finish it first. An error
+            // here (a rank lost) shows in the ranks returned.
+            let _ = self.drain(a);
+        }
         let (tag, b) = ToWorker::Stop.encode();
         for w in 1..self.t.size() {
             if !self.lost[w] {
@@ -217,7 +236,11 @@ impl<T: Transport> Cluster<T> {
     /// share on a thread of its own, over `pool`), equal bit for bit to
     /// `render_frame(r, tracer, frame)` without a deadline. The level-of-detail error in
     /// force is `tracer`'s, sent to every rank. `last`, a frame done with, lends its buffers
-    /// ([`Frame::recycle`]).
+    /// ([`Frame::recycle`]). With `next`, the caller says that frame `frame + 1` of the same
+    /// renderer and error comes next: the other ranks begin it as soon as this one is done,
+    /// while the caller accumulates this one (frames are not otherwise pipelined). A call
+    /// that then asks for something else is still right, only slower: the frame begun is
+    /// finished and thrown away first.
     pub fn render_frame(
         &mut self,
         r: &Renderer,
@@ -225,35 +248,24 @@ impl<T: Transport> Cluster<T> {
         pool: &rayon::ThreadPool,
         frame: u32,
         last: Option<Frame>,
+        next: bool,
     ) -> Result<Frame, ClusterError> {
         assert!(self.is_root(), "workers render with serve");
         let start = Instant::now();
-        let cam = r.settings.camera;
-        let (w, h) = (cam.width, cam.height);
-        let tiles = Rect::tiles(w, h);
-        let mut q = Queue {
-            queue: tiles.iter().copied().collect(),
-            peers: (0..self.t.size()).map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: start }).collect(),
-            frame: match last {
-                Some(f) => f.recycle(w, h, r.settings.aovs),
-                None => Frame::new(w, h, r.settings.aovs),
-            },
-            jobs: JobStats::default(),
-            done: 0,
-            comm: FrameComm { tiles: tiles.len() as u64, ..FrameComm::default() },
-            total_threads: (0..self.t.size()).filter(|&p| !self.lost[p]).map(|p| self.threads[p]).sum(),
-        };
-        let s = &r.settings;
-        let (shader, aovs, env) = (s.shader, s.aovs, r.has_environment());
-        let (tag, b) =
-            ToWorker::Frame { frame, lod_error: tracer.lod_error(), camera: cam, shader, aovs, env }.encode();
-        for p in 1..self.t.size() {
-            if !self.lost[p] {
-                self.t.send(p, tag, &b);
-                q.comm.bytes_out += b.len() as u64;
-                q.comm.messages += 1;
+        let (w, h, aovs) = (r.settings.camera.width, r.settings.camera.height, r.settings.aovs);
+        let message = frame_message(r, tracer, frame);
+        let mut q = match self.ahead.take() {
+            Some(a) if a.frame == frame && a.message == message => a.q,
+            Some(a) => {
+                self.drain(a)?;
+                self.begin(r, frame, &message)
             }
-        }
+            None => self.begin(r, frame, &message),
+        };
+        q.frame = match last {
+            Some(f) => f.recycle(w, h, aovs),
+            None => Frame::new(w, h, aovs),
+        };
         let (to_local, local_rx) = mpsc::channel();
         let (local_tx, from_local) = mpsc::channel();
         let (poll, timeout) = (self.opts.poll, self.opts.timeout);
@@ -263,6 +275,9 @@ impl<T: Transport> Cluster<T> {
                 pool.install(|| run_frame(&mut link, r, tracer, frame, poll, Duration::MAX))
             });
             let mut send = Sender { t: &self.t, local: Some(&to_local), threads: &self.threads };
+            for _ in 0..LANES {
+                q.feed(&mut send, 0, frame);
+            }
             let res = q.dispatch(&mut send, &from_local, &mut self.lost, frame, poll, timeout);
             // Closing the channel ends the render thread if an error left it waiting.
             drop(to_local);
@@ -271,6 +286,11 @@ impl<T: Transport> Cluster<T> {
         });
         res?;
         let busy = busy?.busy;
+        if next {
+            let message = frame_message(r, tracer, frame + 1);
+            let q = self.begin(r, frame + 1, &message);
+            self.ahead = Some(Ahead { frame: frame + 1, message, q, size: (w, h, aovs) });
+        }
         q.comm.seconds = start.elapsed().as_secs_f64();
         q.comm.root_wait = (q.comm.seconds - busy).max(0.0);
         let mut f = q.frame;
@@ -288,6 +308,54 @@ impl<T: Transport> Cluster<T> {
         t.tiles += q.comm.tiles;
         Ok(f)
     }
+
+    /// Starts frame `frame` of `r` on the other ranks: sends them its message and
+    /// [`LANES`] batches each. The queue returned has no frame buffer yet.
+    fn begin(&mut self, r: &Renderer, frame: u32, message: &(crate::Tag, Vec<u8>)) -> Queue {
+        let cam = r.settings.camera;
+        let tiles = Rect::tiles(cam.width, cam.height);
+        let now = Instant::now();
+        let mut q = Queue {
+            queue: tiles.iter().copied().collect(),
+            peers: (0..self.t.size()).map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: now }).collect(),
+            frame: Frame::new(0, 0, false),
+            jobs: JobStats::default(),
+            done: 0,
+            comm: FrameComm { tiles: tiles.len() as u64, ..FrameComm::default() },
+            total_threads: (0..self.t.size()).filter(|&p| !self.lost[p]).map(|p| self.threads[p]).sum(),
+        };
+        let mut send = Sender { t: &self.t, local: None, threads: &self.threads };
+        for p in (1..self.t.size()).filter(|&p| !self.lost[p]) {
+            self.t.send(p, message.0, &message.1);
+            q.comm.bytes_out += message.1.len() as u64;
+            q.comm.messages += 1;
+            for _ in 0..LANES {
+                q.feed(&mut send, p, frame);
+            }
+        }
+        q
+    }
+
+    /// Finishes a frame begun and not asked for (its pixels thrown away): the other ranks
+    /// send back the batches they hold, and their lanes are closed.
+    fn drain(&mut self, a: Ahead) -> Result<(), ClusterError> {
+        let mut q = a.q;
+        q.queue.clear();
+        let held: usize = q.peers.iter().flat_map(|p| p.outstanding.iter().map(Vec::len)).sum();
+        q.comm.tiles = (q.done + held) as u64;
+        q.frame = Frame::new(a.size.0, a.size.1, a.size.2);
+        // No render thread here: a sender kept, so that waiting on it only times out.
+        let (_keep, none) = mpsc::channel();
+        let mut send = Sender { t: &self.t, local: None, threads: &self.threads };
+        q.dispatch(&mut send, &none, &mut self.lost, a.frame, self.opts.poll, self.opts.timeout)
+    }
+}
+
+/// The message that starts frame `frame` of `r` on a worker.
+fn frame_message(r: &Renderer, tracer: &Tracer, frame: u32) -> (crate::Tag, Vec<u8>) {
+    let s = &r.settings;
+    let (camera, shader, aovs, env) = (s.camera, s.shader, s.aovs, r.has_environment());
+    ToWorker::Frame { frame, lod_error: tracer.lod_error(), camera, shader, aovs, env }.encode()
 }
 
 /// Sends the root's messages: to its own render thread over a channel, to the others over
@@ -325,8 +393,9 @@ struct Queue {
 }
 
 impl Queue {
-    /// Runs the frame's queue until every tile is back: gives every live rank [`LANES`]
-    /// batches, a new batch for each one back, and requeues the tiles of ranks lost.
+    /// Runs the frame's queue until every tile is back (every rank given its first
+    /// batches already): gives a rank a new batch for each one back, and requeues the tiles
+    /// of ranks lost.
     fn dispatch<T: Transport>(
         &mut self,
         send: &mut Sender<T>,
@@ -337,13 +406,6 @@ impl Queue {
         timeout: Duration,
     ) -> Result<(), ClusterError> {
         let total = self.comm.tiles as usize;
-        for (p, &gone) in lost.iter().enumerate() {
-            if !gone {
-                for _ in 0..LANES {
-                    self.feed(send, p, frame);
-                }
-            }
-        }
         // The sleep when nothing came: from `poll`, doubling while nothing comes, to 16x.
         let mut nap = poll;
         while self.done < total {

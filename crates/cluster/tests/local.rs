@@ -78,8 +78,11 @@ fn frames_equal_one_process_bit_for_bit() {
             let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
             let p = pool();
             let lost = as_root(&mut c, |c| {
+                // Each frame begun on the other ranks before it is asked for (`next`), each
+                // in the last one's buffers.
+                let mut last = None;
                 for (f, want) in expected.iter().enumerate() {
-                    let got = c.render_frame(&one, &tracer, &p, f as u32, None).unwrap();
+                    let got = c.render_frame(&one, &tracer, &p, f as u32, last.take(), f < 2).unwrap();
                     assert_eq!(bits(&got), bits(want), "frame {f} aovs {aovs}");
                     assert_eq!(
                         (got.depth.clone(), got.normal.clone(), got.albedo.clone()),
@@ -89,11 +92,51 @@ fn frames_equal_one_process_bit_for_bit() {
                     assert_eq!(c.last.tiles, Rect::tiles(150, 83).len() as u64);
                     assert!(c.last.root_tiles < c.last.tiles, "the other ranks rendered nothing: {:?}", c.last);
                     assert!(c.last.bytes_in > 0 && c.last.bytes_out > 0);
+                    last = Some(got);
                 }
             });
             assert!(lost.is_empty());
         });
     }
+}
+
+#[test]
+fn a_frame_begun_and_not_asked_for_is_finished_and_thrown_away() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = megaray_testkit::gen(dir.path(), "plant:10k");
+    let (path, _) = megaray_testkit::build_without_lod(dir.path(), &[ply], "plant", None);
+    let scene = Scene::open(&path).unwrap();
+    let checksum = scene.header().header_checksum;
+    let r = renderer(&scene, false);
+    let tracer = Tracer::new(&scene);
+    let mut ranks = world(3);
+    let root_t = ranks.remove(0);
+    std::thread::scope(|s| {
+        let served: Vec<_> = ranks
+            .into_iter()
+            .map(|t| {
+                let scene = &scene;
+                s.spawn(move || {
+                    let mut r = renderer(scene, false);
+                    let mut c = Cluster::join(t, checksum, 1, opts()).unwrap();
+                    c.serve(&mut r, None, &Tracer::new(scene), &pool()).unwrap()
+                })
+            })
+            .collect();
+        let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
+        let p = pool();
+        let lost = as_root(&mut c, |c| {
+            // Frame 1 is begun, frame 2 asked for: frame 1 is finished first, and frame 2 is
+            // still exact; frame 3 is begun and the session ends.
+            c.render_frame(&r, &tracer, &p, 0, None, true).unwrap();
+            let got = c.render_frame(&r, &tracer, &p, 2, None, true).unwrap();
+            assert_eq!(bits(&got), bits(&pool().install(|| render_frame(&r, &tracer, 2))));
+        });
+        assert!(lost.is_empty());
+        for h in served {
+            assert_eq!(h.join().unwrap(), 4, "frames 0 to 3 each started on every rank");
+        }
+    });
 }
 
 #[test]
@@ -156,11 +199,11 @@ fn a_silent_rank_loses_its_tiles_and_the_frame_is_still_exact() {
         let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
         let p = pool();
         let lost = as_root(&mut c, |c| {
-            let got = c.render_frame(&r, &tracer, &p, 0, None).unwrap();
+            let got = c.render_frame(&r, &tracer, &p, 0, None, false).unwrap();
             assert_eq!(bits(&got), bits(&want));
             assert_eq!(c.lost(), vec![1]);
             // The next frame goes on without it.
-            let got = c.render_frame(&r, &tracer, &p, 1, None).unwrap();
+            let got = c.render_frame(&r, &tracer, &p, 1, None, false).unwrap();
             assert_eq!(bits(&got), bits(&pool().install(|| render_frame(&r, &tracer, 1))));
         });
         assert_eq!(lost, vec![1]);

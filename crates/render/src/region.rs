@@ -5,7 +5,7 @@
 //! [`crate::render_frame`] renders at once (without a deadline: pieces always finish).
 
 use megaray_trace::jobs::{self, JobOptions, JobStats};
-use megaray_trace::Tracer;
+use megaray_trace::{RayCaster, Tracer};
 use rayon::prelude::*;
 
 use crate::frame::{Frame, Renderer, TILE};
@@ -98,34 +98,67 @@ impl Piece {
 pub fn render_pieces(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect]) -> (Vec<Piece>, JobStats) {
     let aovs = r.settings.aovs;
     let mut pieces: Vec<Piece> = rects.iter().map(|&rect| Piece::blank(rect, aovs)).collect();
-    let paged = tracer.pager().is_some();
+    let mut stats = JobStats::default();
+    if tracer.pager().is_none() {
+        // Nothing can suspend: a piece a task, its pixels straight into it (as the in-core
+        // frame loop does).
+        pieces.par_iter_mut().for_each(|pc| fill_in_core(r, tracer, frame, pc));
+    } else {
+        render_paged(r, tracer, frame, rects, &mut pieces, &mut stats);
+    }
+    // The loop's counts are of jobs; the pieces', of pixels.
+    stats.finished = pieces.iter().map(|p| p.rect.area() as u64).sum();
+    stats.unfinished = 0;
+    stats.rays = pieces.iter().map(|p| p.rays).sum();
+    (pieces, stats)
+}
+
+/// Renders piece `pc` on an unpaged tracer: rows a group at a time, or with AOVs a pixel
+/// at a time.
+fn fill_in_core(r: &Renderer, tracer: &Tracer, frame: u32, pc: &mut Piece) {
+    let mut caster = tracer;
+    let rc = pc.rect;
+    let w = (rc.x1 - rc.x0) as usize;
+    for (row, y) in (rc.y0..rc.y1).enumerate() {
+        if pc.depth.is_empty() {
+            for x0 in (rc.x0..rc.x1).step_by(GROUP) {
+                let g = Group { y, x0, step: 1, len: (rc.x1 - x0).min(GROUP as u32) };
+                let out = r.group(g, frame, &mut caster).expect("a plain in-core Tracer never suspends");
+                let start = row * w + (x0 - rc.x0) as usize;
+                pc.color[start..start + g.len as usize].copy_from_slice(&out.rgb[..g.len as usize]);
+                pc.rays += out.rays as u64;
+            }
+            continue;
+        }
+        for x in rc.x0..rc.x1 {
+            let s = r.pixel(x, y, frame, &mut caster).expect("a plain in-core Tracer never suspends");
+            let i = row * w + (x - rc.x0) as usize;
+            pc.color[i] = s.radiance.to_array();
+            pc.depth[i] = s.depth;
+            pc.normal[i] = s.normal.to_array();
+            pc.albedo[i] = s.albedo.to_array();
+            pc.rays += s.rays as u64;
+        }
+    }
+}
+
+/// Renders `pieces` (of `rects`) on a paged tracer as [`megaray_trace::jobs`]: pixels that
+/// wait for tiles are parked while the others go on.
+fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], pieces: &mut [Piece], stats: &mut JobStats) {
     let job_opts =
         |chunk| JobOptions { chunk, deadline: None, max_parked: jobs::MAX_PARKED, stand_in: r.settings.stand_in };
-    let mut stats = JobStats::default();
-    if aovs {
+    if r.settings.aovs {
         // A pixel a job: (piece, index in it).
         let order: Vec<(u32, u32)> =
             rects.iter().enumerate().flat_map(|(p, rc)| (0..rc.area() as u32).map(move |i| (p as u32, i))).collect();
-        let pixel = |&(p, i): &(u32, u32), caster: &mut dyn megaray_trace::RayCaster| {
+        let run = jobs::run(tracer, order.len(), &job_opts(64), |k, caster| {
+            let (p, i) = order[k];
             let rc = rects[p as usize];
             let w = rc.x1 - rc.x0;
             r.pixel(rc.x0 + i % w, rc.y0 + i / w, frame, caster).map(|s| (s, caster.take_approx()))
-        };
-        let results: Vec<(usize, (crate::SampleOut, bool))> = if paged {
-            let run = jobs::run(tracer, order.len(), &job_opts(64), |k, caster| pixel(&order[k], caster));
-            stats = run.stats;
-            run.into_finished().collect()
-        } else {
-            order
-                .par_iter()
-                .enumerate()
-                .map(|(k, o)| {
-                    let mut caster = tracer;
-                    (k, pixel(o, &mut caster).expect("a plain in-core Tracer never suspends"))
-                })
-                .collect()
-        };
-        for (k, (s, apx)) in results {
+        });
+        *stats = run.stats;
+        for (k, (s, apx)) in run.into_finished() {
             let (p, i) = order[k];
             let pc = &mut pieces[p as usize];
             let i = i as usize;
@@ -148,21 +181,9 @@ pub fn render_pieces(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect]) 
                 }
             }
         }
-        let results: Vec<(usize, crate::rows::GroupOut)> = if paged {
-            let run = jobs::run(tracer, groups.len(), &job_opts(8), |k, caster| r.group(groups[k].1, frame, caster));
-            stats = run.stats;
-            run.into_finished().collect()
-        } else {
-            groups
-                .par_iter()
-                .enumerate()
-                .map(|(k, &(_, g))| {
-                    let mut caster = tracer;
-                    (k, r.group(g, frame, &mut caster).expect("a plain in-core Tracer never suspends"))
-                })
-                .collect()
-        };
-        for (k, out) in results {
+        let run = jobs::run(tracer, groups.len(), &job_opts(8), |k, caster| r.group(groups[k].1, frame, caster));
+        *stats = run.stats;
+        for (k, out) in run.into_finished() {
             let (p, g) = groups[k];
             let pc = &mut pieces[p as usize];
             let w = pc.rect.x1 - pc.rect.x0;
@@ -176,11 +197,6 @@ pub fn render_pieces(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect]) 
             pc.rays += out.rays as u64;
         }
     }
-    // The loop's counts are of jobs; the pieces', of pixels.
-    stats.finished = pieces.iter().map(|p| p.rect.area() as u64).sum();
-    stats.unfinished = 0;
-    stats.rays = pieces.iter().map(|p| p.rays).sum();
-    (pieces, stats)
 }
 
 impl Frame {
