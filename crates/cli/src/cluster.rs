@@ -147,7 +147,7 @@ pub(crate) fn frame_source<'t>(
     tracer: &'t megaray_trace::Tracer,
     pool: &'t rayon::ThreadPool,
 ) -> megaray_view::FrameSource<'t> {
-    Box::new(move |r, i| c.render_frame(r, tracer, pool, i, None, false).map_err(|e| e.to_string()))
+    Box::new(move |r, i| c.render_frame(r, tracer, pool, i, false).map_err(|e| e.to_string()))
 }
 
 /// A frame a page of `serve` asks of rank 0's main thread (the one that talks MPI).
@@ -196,6 +196,6 @@ pub(crate) fn serve_requests(
         }
         let r = last.as_mut().expect("made above");
         r.settings = req.settings;
-        let _ = req.reply.send(c.render_frame(r, tracer, pool, req.index, None, false).map_err(|e| e.to_string()));
+        let _ = req.reply.send(c.render_frame(r, tracer, pool, req.index, false).map_err(|e| e.to_string()));
     }
 }

@@ -696,7 +696,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             // the level of detail may change between frames (the governor, with a budget).
             let steady = pager.is_none() || a.lod_error <= 0.0 || scene.header().lod_part_count == 0;
             let more = |i: u32| steady && stop.time.is_none() && stop.frames.is_some_and(|n| i + 1 < n);
-            let frame = |i, last| c.render_frame(&renderer, &tracer, &pool, i, last, more(i));
+            let frame = |i, acc: &mut Accumulator| c.accumulate_frame(&renderer, &tracer, &pool, i, acc, more(i));
             render_progressive_with(&renderer, &tracer, stop, frame, &mut on_frame)?
         }
         None => pool.install(|| render_progressive(&renderer, &tracer, stop, &mut on_frame)),

@@ -5,7 +5,7 @@ use std::collections::VecDeque;
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
-use megaray_render::{Environment, Frame, Rect, Renderer};
+use megaray_render::{Accumulator, Environment, Frame, Piece, Rect, Renderer};
 use megaray_trace::jobs::JobStats;
 use megaray_trace::Tracer;
 
@@ -56,8 +56,6 @@ struct Ahead {
     frame: u32,
     message: (crate::Tag, Vec<u8>),
     q: Queue,
-    /// Width, height, AOVs.
-    size: (u32, u32, bool),
 }
 
 /// The root's view of one rank during a frame.
@@ -235,24 +233,58 @@ impl<T: Transport> Cluster<T> {
     /// On the root: renders frame `frame` of `r`'s camera across the ranks (this rank's
     /// share on a thread of its own, over `pool`), equal bit for bit to
     /// `render_frame(r, tracer, frame)` without a deadline. The level-of-detail error in
-    /// force is `tracer`'s, sent to every rank. `last`, a frame done with, lends its buffers
-    /// ([`Frame::recycle`]). With `next`, the caller says that frame `frame + 1` of the same
-    /// renderer and error comes next: the other ranks begin it as soon as this one is done,
-    /// while the caller accumulates this one (frames are not otherwise pipelined). A call
-    /// that then asks for something else is still right, only slower: the frame begun is
-    /// finished and thrown away first.
+    /// force is `tracer`'s, sent to every rank. With `next`, see
+    /// [`Cluster::accumulate_frame`].
     pub fn render_frame(
         &mut self,
         r: &Renderer,
         tracer: &Tracer,
         pool: &rayon::ThreadPool,
         frame: u32,
-        last: Option<Frame>,
         next: bool,
     ) -> Result<Frame, ClusterError> {
+        let s = &r.settings;
+        let mut f = Frame::new(s.camera.width, s.camera.height, s.aovs);
+        let jobs = self.run(r, tracer, pool, frame, next, &mut |pc| f.put(pc))?;
+        f.jobs = jobs;
+        Ok(f)
+    }
+
+    /// On the root: [`Cluster::render_frame`] added to `acc` as its pieces come
+    /// ([`Accumulator::add_piece`]), with no frame put together; the sums equal those of
+    /// `acc.add_frame` of the frame. With `next`, the caller says that frame `frame + 1` of
+    /// the same renderer and error comes next: the other ranks begin it as soon as this one
+    /// is done, while the caller is busy with this one. A call that then asks for
+    /// something else is still right, only slower: the frame begun is finished and thrown
+    /// away first.
+    pub fn accumulate_frame(
+        &mut self,
+        r: &Renderer,
+        tracer: &Tracer,
+        pool: &rayon::ThreadPool,
+        frame: u32,
+        acc: &mut Accumulator,
+        next: bool,
+    ) -> Result<(), ClusterError> {
+        acc.begin_frame(r.settings.aovs);
+        let jobs = self.run(r, tracer, pool, frame, next, &mut |pc| acc.add_piece(pc))?;
+        acc.end_frame(&jobs);
+        Ok(())
+    }
+
+    /// Runs frame `frame` across the ranks, each piece to `sink` as it comes; returns the
+    /// frame loop's counts.
+    fn run(
+        &mut self,
+        r: &Renderer,
+        tracer: &Tracer,
+        pool: &rayon::ThreadPool,
+        frame: u32,
+        next: bool,
+        sink: &mut dyn FnMut(&Piece),
+    ) -> Result<JobStats, ClusterError> {
         assert!(self.is_root(), "workers render with serve");
         let start = Instant::now();
-        let (w, h, aovs) = (r.settings.camera.width, r.settings.camera.height, r.settings.aovs);
         let message = frame_message(r, tracer, frame);
         let mut q = match self.ahead.take() {
             Some(a) if a.frame == frame && a.message == message => a.q,
@@ -262,13 +294,9 @@ impl<T: Transport> Cluster<T> {
             }
             None => self.begin(r, frame, &message),
         };
-        q.frame = match last {
-            Some(f) => f.recycle(w, h, aovs),
-            None => Frame::new(w, h, aovs),
-        };
         let (to_local, local_rx) = mpsc::channel();
         let (local_tx, from_local) = mpsc::channel();
-        let (poll, timeout) = (self.opts.poll, self.opts.timeout);
+        let poll = self.opts.poll;
         let (res, busy) = std::thread::scope(|s| {
             let local = s.spawn(move || {
                 let mut link = ChannelLink { tx: local_tx, rx: local_rx, rank: 0 };
@@ -278,7 +306,7 @@ impl<T: Transport> Cluster<T> {
             for _ in 0..LANES {
                 q.feed(&mut send, 0, frame);
             }
-            let res = q.dispatch(&mut send, &from_local, &mut self.lost, frame, poll, timeout);
+            let res = q.dispatch(&mut send, &from_local, &mut self.lost, frame, self.opts, sink);
             // Closing the channel ends the render thread if an error left it waiting.
             drop(to_local);
             let busy = local.join().expect("the root's render thread panicked");
@@ -289,14 +317,10 @@ impl<T: Transport> Cluster<T> {
         if next {
             let message = frame_message(r, tracer, frame + 1);
             let q = self.begin(r, frame + 1, &message);
-            self.ahead = Some(Ahead { frame: frame + 1, message, q, size: (w, h, aovs) });
+            self.ahead = Some(Ahead { frame: frame + 1, message, q });
         }
         q.comm.seconds = start.elapsed().as_secs_f64();
         q.comm.root_wait = (q.comm.seconds - busy).max(0.0);
-        let mut f = q.frame;
-        f.jobs = q.jobs;
-        f.jobs.finished = (w * h) as u64;
-        f.jobs.rays = f.rays;
         self.last = q.comm;
         let t = &mut self.total;
         t.bytes_out += q.comm.bytes_out;
@@ -306,7 +330,8 @@ impl<T: Transport> Cluster<T> {
         t.root_wait += q.comm.root_wait;
         t.root_tiles += q.comm.root_tiles;
         t.tiles += q.comm.tiles;
-        Ok(f)
+        let cam = r.settings.camera;
+        Ok(JobStats { finished: (cam.width * cam.height) as u64, rays: q.rays, ..q.jobs })
     }
 
     /// Starts frame `frame` of `r` on the other ranks: sends them its message and
@@ -318,7 +343,8 @@ impl<T: Transport> Cluster<T> {
         let mut q = Queue {
             queue: tiles.iter().copied().collect(),
             peers: (0..self.t.size()).map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: now }).collect(),
-            frame: Frame::new(0, 0, false),
+            aovs: r.settings.aovs,
+            rays: 0,
             jobs: JobStats::default(),
             done: 0,
             comm: FrameComm { tiles: tiles.len() as u64, ..FrameComm::default() },
@@ -343,11 +369,10 @@ impl<T: Transport> Cluster<T> {
         q.queue.clear();
         let held: usize = q.peers.iter().flat_map(|p| p.outstanding.iter().map(Vec::len)).sum();
         q.comm.tiles = (q.done + held) as u64;
-        q.frame = Frame::new(a.size.0, a.size.1, a.size.2);
         // No render thread here: a sender kept, so that waiting on it only times out.
         let (_keep, none) = mpsc::channel();
         let mut send = Sender { t: &self.t, local: None, threads: &self.threads };
-        q.dispatch(&mut send, &none, &mut self.lost, a.frame, self.opts.poll, self.opts.timeout)
+        q.dispatch(&mut send, &none, &mut self.lost, a.frame, self.opts, &mut |_| {})
     }
 }
 
@@ -384,7 +409,10 @@ impl<T: Transport> Sender<'_, T> {
 struct Queue {
     queue: VecDeque<Rect>,
     peers: Vec<Peer>,
-    frame: Frame,
+    /// Whether pieces carry AOVs.
+    aovs: bool,
+    /// Rays of the pieces back.
+    rays: u64,
     jobs: JobStats,
     /// Tiles back.
     done: usize,
@@ -402,9 +430,10 @@ impl Queue {
         from_local: &mpsc::Receiver<ToRoot>,
         lost: &mut [bool],
         frame: u32,
-        poll: Duration,
-        timeout: Duration,
+        opts: ClusterOptions,
+        sink: &mut dyn FnMut(&Piece),
     ) -> Result<(), ClusterError> {
+        let (poll, timeout) = (opts.poll, opts.timeout);
         let total = self.comm.tiles as usize;
         // The sleep when nothing came: from `poll`, doubling while nothing comes, to 16x.
         let mut nap = poll;
@@ -419,7 +448,7 @@ impl Queue {
                 }
                 match ToRoot::decode(from, tag, &bytes)? {
                     ToRoot::Done { frame: f, pieces, stats } if f == frame => {
-                        self.take(from, pieces, stats)?;
+                        self.take(from, pieces, stats, sink)?;
                         self.feed(send, from, frame);
                     }
                     other => {
@@ -429,7 +458,7 @@ impl Queue {
             }
             while let Ok(m) = from_local.try_recv() {
                 got = true;
-                self.take_local(send, m, frame)?;
+                self.take_local(send, m, frame, sink)?;
             }
             for p in 1..self.peers.len() {
                 let peer = &mut self.peers[p];
@@ -472,7 +501,7 @@ impl Queue {
             let most = if shortest >= 32 { 16 } else { 4 };
             match from_local.recv_timeout(nap) {
                 Ok(m) => {
-                    self.take_local(send, m, frame)?;
+                    self.take_local(send, m, frame, sink)?;
                     nap = poll;
                 }
                 Err(e) => {
@@ -495,10 +524,16 @@ impl Queue {
     }
 
     /// Takes a message from this rank's own render thread.
-    fn take_local<T: Transport>(&mut self, send: &mut Sender<T>, m: ToRoot, frame: u32) -> Result<(), ClusterError> {
+    fn take_local<T: Transport>(
+        &mut self,
+        send: &mut Sender<T>,
+        m: ToRoot,
+        frame: u32,
+        sink: &mut dyn FnMut(&Piece),
+    ) -> Result<(), ClusterError> {
         if let ToRoot::Done { pieces, stats, .. } = m {
             self.comm.root_tiles += pieces.len() as u64;
-            self.take(0, pieces, stats)?;
+            self.take(0, pieces, stats, sink)?;
             self.feed(send, 0, frame);
         }
         Ok(())
@@ -534,13 +569,19 @@ impl Queue {
     }
 
     /// Puts rank `p`'s pieces into the frame: they must be its oldest batch, in order.
-    fn take(&mut self, p: usize, pieces: Vec<megaray_render::Piece>, stats: JobStats) -> Result<(), ClusterError> {
+    fn take(
+        &mut self,
+        p: usize,
+        pieces: Vec<Piece>,
+        stats: JobStats,
+        sink: &mut dyn FnMut(&Piece),
+    ) -> Result<(), ClusterError> {
         let peer = &mut self.peers[p];
         let batch = peer.outstanding.pop_front().unwrap_or_default();
         if batch.len() != pieces.len() || batch.iter().zip(&pieces).any(|(r, pc)| *r != pc.rect) {
             return Err(ClusterError::Protocol { rank: p, what: "tiles it was not given".into() });
         }
-        let aovs = !self.frame.depth.is_empty();
+        let aovs = self.aovs;
         for pc in &pieces {
             let n = pc.rect.area();
             let sizes_ok = pc.color.len() == n
@@ -553,7 +594,8 @@ impl Queue {
                     what: format!("a tile {:?} of the wrong size", pc.rect),
                 });
             }
-            self.frame.put(pc);
+            self.rays += pc.rays;
+            sink(pc);
         }
         peer.since = Instant::now();
         self.done += batch.len();

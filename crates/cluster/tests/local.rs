@@ -33,6 +33,14 @@ fn bits(f: &Frame) -> Vec<u32> {
     f.image.pixels.iter().flatten().map(|v| v.to_bits()).collect()
 }
 
+/// The accumulator's image as a frame (to compare bits).
+fn frame_of(acc: &Accumulator) -> Frame {
+    let img = acc.image();
+    let mut f = Frame::new(img.width, img.height, false);
+    f.image = img;
+    f
+}
+
 /// Runs the root's part `f`; whatever happens in it (a failed assertion), ends the session
 /// so that the other ranks' threads return and the test ends.
 fn as_root(c: &mut Option<Cluster<LocalTransport>>, f: impl FnOnce(&mut Cluster<LocalTransport>)) -> Vec<usize> {
@@ -72,17 +80,15 @@ fn frames_equal_one_process_bit_for_bit() {
                     let tracer = if t.rank() == 1 { Tracer::paged(&pager) } else { Tracer::new(scene) };
                     let mut r = renderer(scene, aovs);
                     let mut c = Cluster::join(t, checksum, 1, opts()).unwrap();
-                    assert_eq!(c.serve(&mut r, None, &tracer, &pool()).unwrap(), 3);
+                    assert_eq!(c.serve(&mut r, None, &tracer, &pool()).unwrap(), 6);
                 });
             }
             let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
             let p = pool();
             let lost = as_root(&mut c, |c| {
-                // Each frame begun on the other ranks before it is asked for (`next`), each
-                // in the last one's buffers.
-                let mut last = None;
+                // Each frame begun on the other ranks before it is asked for (`next`).
                 for (f, want) in expected.iter().enumerate() {
-                    let got = c.render_frame(&one, &tracer, &p, f as u32, last.take(), f < 2).unwrap();
+                    let got = c.render_frame(&one, &tracer, &p, f as u32, f < 2).unwrap();
                     assert_eq!(bits(&got), bits(want), "frame {f} aovs {aovs}");
                     assert_eq!(
                         (got.depth.clone(), got.normal.clone(), got.albedo.clone()),
@@ -92,7 +98,18 @@ fn frames_equal_one_process_bit_for_bit() {
                     assert_eq!(c.last.tiles, Rect::tiles(150, 83).len() as u64);
                     assert!(c.last.root_tiles < c.last.tiles, "the other ranks rendered nothing: {:?}", c.last);
                     assert!(c.last.bytes_in > 0 && c.last.bytes_out > 0);
-                    last = Some(got);
+                }
+                // Added as they come, the pieces give the sums of the frames added whole.
+                let (mut acc, mut want) = (Accumulator::new(150, 83), Accumulator::new(150, 83));
+                for (f, frame) in expected.iter().enumerate() {
+                    c.accumulate_frame(&one, &tracer, &p, f as u32, &mut acc, f < 2).unwrap();
+                    want.add_frame(frame);
+                    assert_eq!(bits(&frame_of(&acc)), bits(&frame_of(&want)), "frame {f} aovs {aovs}");
+                    assert_eq!((acc.frames(), acc.rays()), (want.frames(), want.rays()));
+                    if aovs {
+                        let (a, b) = (acc.aovs(), want.aovs());
+                        assert_eq!((a.depth, a.normal, a.albedo), (b.depth, b.normal, b.albedo));
+                    }
                 }
             });
             assert!(lost.is_empty());
@@ -128,8 +145,8 @@ fn a_frame_begun_and_not_asked_for_is_finished_and_thrown_away() {
         let lost = as_root(&mut c, |c| {
             // Frame 1 is begun, frame 2 asked for: frame 1 is finished first, and frame 2 is
             // still exact; frame 3 is begun and the session ends.
-            c.render_frame(&r, &tracer, &p, 0, None, true).unwrap();
-            let got = c.render_frame(&r, &tracer, &p, 2, None, true).unwrap();
+            c.render_frame(&r, &tracer, &p, 0, true).unwrap();
+            let got = c.render_frame(&r, &tracer, &p, 2, true).unwrap();
             assert_eq!(bits(&got), bits(&pool().install(|| render_frame(&r, &tracer, 2))));
         });
         assert!(lost.is_empty());
@@ -199,11 +216,11 @@ fn a_silent_rank_loses_its_tiles_and_the_frame_is_still_exact() {
         let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
         let p = pool();
         let lost = as_root(&mut c, |c| {
-            let got = c.render_frame(&r, &tracer, &p, 0, None, false).unwrap();
+            let got = c.render_frame(&r, &tracer, &p, 0, false).unwrap();
             assert_eq!(bits(&got), bits(&want));
             assert_eq!(c.lost(), vec![1]);
             // The next frame goes on without it.
-            let got = c.render_frame(&r, &tracer, &p, 1, None, false).unwrap();
+            let got = c.render_frame(&r, &tracer, &p, 1, false).unwrap();
             assert_eq!(bits(&got), bits(&pool().install(|| render_frame(&r, &tracer, 1))));
         });
         assert_eq!(lost, vec![1]);

@@ -15,6 +15,7 @@ use megaray_trace::Tracer;
 use crate::env::luminance;
 use crate::frame::{render_frame, Frame, Renderer};
 use crate::image_out::{Aovs, Image};
+use crate::region::Piece;
 
 /// Running sums of frames: per pixel the colour sum and the sum of squared luminance (for
 /// the error estimate), and the AOV sums.
@@ -35,6 +36,34 @@ pub struct Accumulator {
     albedo: Vec<[f32; 3]>,
     rays: u64,
     jobs: JobStats,
+    /// Between [`Accumulator::begin_frame`] and [`Accumulator::end_frame`]: whether the
+    /// frame's AOVs are the first (set, not combined).
+    first_aovs: bool,
+}
+
+/// Adds one sample `p` to a pixel's sums (`approx`: see [`Accumulator::add_frame`]).
+#[inline]
+fn add_sample(
+    sum: &mut [f64; 3],
+    lum_sq: &mut f64,
+    count: &mut u32,
+    provisional: &mut bool,
+    p: [f32; 3],
+    approx: bool,
+) {
+    if approx && *count > 0 && !*provisional {
+        return;
+    }
+    if !approx && *provisional {
+        (*sum, *lum_sq, *count) = ([0.0; 3], 0.0, 0);
+    }
+    *provisional = approx;
+    *count += 1;
+    for k in 0..3 {
+        sum[k] += p[k] as f64;
+    }
+    let l = luminance(p.into()) as f64;
+    *lum_sq += l * l;
 }
 
 impl Accumulator {
@@ -54,6 +83,7 @@ impl Accumulator {
             albedo: Vec::new(),
             rays: 0,
             jobs: JobStats::default(),
+            first_aovs: false,
         }
     }
 
@@ -107,21 +137,8 @@ impl Accumulator {
                     if !f.is_done(i) {
                         continue;
                     }
-                    let approx = f.is_approx(i);
-                    if approx && counts[j] > 0 && !provisional[j] {
-                        continue;
-                    }
-                    if !approx && provisional[j] {
-                        (sum[j], lum_sq[j], counts[j]) = ([0.0; 3], 0.0, 0);
-                    }
-                    provisional[j] = approx;
-                    counts[j] += 1;
                     let p = f.image.pixels[i];
-                    for k in 0..3 {
-                        sum[j][k] += p[k] as f64;
-                    }
-                    let l = luminance(p.into()) as f64;
-                    lum_sq[j] += l * l;
+                    add_sample(&mut sum[j], &mut lum_sq[j], &mut counts[j], &mut provisional[j], p, f.is_approx(i));
                 }
             });
         if !f.depth.is_empty() {
@@ -139,14 +156,65 @@ impl Accumulator {
                 }
             }
         }
-        self.frames += 1;
         self.rays += f.rays;
+        self.end_frame(&f.jobs);
+    }
+
+    /// Starts adding a frame piece by piece, as the pieces come (a frame shared between
+    /// processes): [`Accumulator::add_piece`] for each, every pixel once, then
+    /// [`Accumulator::end_frame`]. The sums equal, bit for bit, [`Accumulator::add_frame`]
+    /// of the frame the pieces make, with no frame put together.
+    pub fn begin_frame(&mut self, aovs: bool) {
+        self.first_aovs = aovs && (self.frames == 0 || self.depth.is_empty());
+        if self.first_aovs {
+            let n = (self.width * self.height) as usize;
+            (self.depth, self.normal, self.albedo) = (vec![0.0; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        }
+    }
+
+    /// Adds piece `p` of the frame begun (its rays counted). Panics if it lies outside.
+    pub fn add_piece(&mut self, p: &Piece) {
+        let rc = p.rect;
+        assert!(rc.within(self.width, self.height), "piece {rc:?} outside the accumulator");
+        let pw = (rc.x1 - rc.x0) as usize;
+        let aovs = !p.depth.is_empty() && !self.depth.is_empty();
+        for (row, y) in (rc.y0..rc.y1).enumerate() {
+            // A row of the piece against its place in the sums.
+            let (at, q) = ((y * self.width + rc.x0) as usize, row * pw);
+            let (to, from) = (at..at + pw, q..q + pw);
+            let sums = self.sum[to.clone()].iter_mut().zip(&mut self.lum_sq[to.clone()]);
+            let counts = self.counts[to.clone()].iter_mut().zip(&mut self.provisional[to.clone()]);
+            for (j, ((sum, lum_sq), (count, provisional))) in sums.zip(counts).enumerate() {
+                let approx = !p.approx.is_empty() && p.approx[q + j];
+                add_sample(sum, lum_sq, count, provisional, p.color[q + j], approx);
+            }
+            if aovs {
+                // As `add_frame`: the first frame's depth is taken, later ones' minimum.
+                for (d, &e) in self.depth[to.clone()].iter_mut().zip(&p.depth[from.clone()]) {
+                    *d = if self.first_aovs { e } else { d.min(e) };
+                }
+                let normals = self.normal[to.clone()].iter_mut().zip(&p.normal[from.clone()]);
+                for (a, b) in normals.chain(self.albedo[to].iter_mut().zip(&p.albedo[from])) {
+                    for k in 0..3 {
+                        a[k] += b[k];
+                    }
+                }
+            }
+        }
+        self.rays += p.rays;
+    }
+
+    /// Ends a frame begun with [`Accumulator::begin_frame`] (or added whole), with the
+    /// frame loop's counts.
+    pub fn end_frame(&mut self, jobs: &JobStats) {
+        self.frames += 1;
+        self.first_aovs = false;
         let j = &mut self.jobs;
-        j.finished += f.jobs.finished;
-        j.unfinished += f.jobs.unfinished;
-        j.suspended += f.jobs.suspended;
-        j.rays += f.jobs.rays;
-        j.wait_secs += f.jobs.wait_secs;
+        j.finished += jobs.finished;
+        j.unfinished += jobs.unfinished;
+        j.suspended += jobs.suspended;
+        j.rays += jobs.rays;
+        j.wait_secs += jobs.wait_secs;
     }
 
     /// The mean of the frames added (black before the first), per pixel over the frames that
@@ -294,18 +362,21 @@ pub fn render_progressive(
     stop: Stop,
     on_frame: impl FnMut(&Accumulator),
 ) -> Accumulator {
-    let frame = |i, _| Ok::<_, std::convert::Infallible>(render_frame(r, tracer, i));
+    let frame = |i, acc: &mut Accumulator| {
+        acc.add_frame(&render_frame(r, tracer, i));
+        Ok::<_, std::convert::Infallible>(())
+    };
     render_progressive_with(r, tracer, stop, frame, on_frame).unwrap_or_else(|e| match e {})
 }
 
-/// [`render_progressive`] with frames made by `frame` (frame index, the last frame made
-/// if any, to reuse its buffers -> frame), which may fail (a frame shared between
-/// processes): the first error ends the run.
+/// [`render_progressive`] with frames added by `add` (frame index, the accumulator: adds
+/// that frame to it), which may fail (a frame shared between processes): the first error
+/// ends the run.
 pub fn render_progressive_with<E>(
     r: &Renderer,
     tracer: &Tracer,
     stop: Stop,
-    mut frame: impl FnMut(u32, Option<Frame>) -> Result<Frame, E>,
+    mut add: impl FnMut(u32, &mut Accumulator) -> Result<(), E>,
     mut on_frame: impl FnMut(&Accumulator),
 ) -> Result<Accumulator, E> {
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
@@ -317,11 +388,8 @@ pub fn render_progressive_with<E>(
         (None, Some(_)) => u32::MAX,
         (None, None) => 1,
     };
-    let mut last = None;
     while acc.frames() < max_frames {
-        let f = frame(acc.frames(), last.take())?;
-        acc.add_frame(&f);
-        last = Some(f);
+        add(acc.frames(), &mut acc)?;
         governor.after_frame(tracer);
         on_frame(&acc);
         if stop.time.is_some_and(|t| start.elapsed() >= t) {
@@ -333,4 +401,58 @@ pub fn render_progressive_with<E>(
         }
     }
     Ok(acc)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::region::Rect;
+
+    /// Frame `k` of a `w` x `h` sequence cut into pieces: values that differ per pixel and
+    /// frame (a negative zero among them), some pixels approximate in the early frames.
+    fn pieces(w: u32, h: u32, k: u32, aovs: bool) -> Vec<Piece> {
+        let mut ps: Vec<Piece> = Rect::tiles(w, h).into_iter().map(|r| Piece::blank(r, aovs)).collect();
+        for p in &mut ps {
+            for i in 0..p.color.len() {
+                let v = ((i as u32 * 7 + k * 13 + p.rect.x0 * 3 + p.rect.y0) % 17) as f32 * 0.37;
+                p.color[i] = [v, 0.5 * v, -0.0];
+                if aovs {
+                    (p.depth[i], p.normal[i], p.albedo[i]) = (v + k as f32, [-0.0, v, 1.0], [v, v, v]);
+                }
+                if k < 2 && i % 5 == k as usize {
+                    p.mark_approx(i);
+                }
+            }
+            p.rays = 2;
+        }
+        ps
+    }
+
+    #[test]
+    fn pieces_added_as_they_come_equal_the_frame_added_whole() {
+        let (w, h) = (70, 45);
+        for aovs in [false, true] {
+            let (mut whole, mut piecewise) = (Accumulator::new(w, h), Accumulator::new(w, h));
+            for k in 0..4 {
+                let ps = pieces(w, h, k, aovs);
+                let mut f = Frame::new(w, h, aovs);
+                ps.iter().for_each(|p| f.put(p));
+                f.jobs.finished = (w * h) as u64;
+                whole.add_frame(&f);
+                piecewise.begin_frame(aovs);
+                // In another order than the frame's.
+                ps.iter().rev().for_each(|p| piecewise.add_piece(p));
+                piecewise.end_frame(&f.jobs);
+                let bits = |a: &Accumulator| a.sum.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&piecewise), bits(&whole), "frame {k}");
+                assert_eq!((&piecewise.lum_sq, &piecewise.counts), (&whole.lum_sq, &whole.counts));
+                assert_eq!(piecewise.provisional, whole.provisional);
+                let aov_bits = |a: &Accumulator| {
+                    let n = a.normal.iter().chain(&a.albedo).flatten();
+                    (a.depth.iter().chain(n).map(|v| v.to_bits()).collect::<Vec<_>>(), a.rays, a.frames)
+                };
+                assert_eq!(aov_bits(&piecewise), aov_bits(&whole), "frame {k}");
+            }
+        }
+    }
 }

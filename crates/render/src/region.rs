@@ -71,7 +71,7 @@ pub struct Piece {
 
 impl Piece {
     /// A black piece of `rect`, with AOV buffers when `aovs`.
-    fn blank(rect: Rect, aovs: bool) -> Piece {
+    pub(crate) fn blank(rect: Rect, aovs: bool) -> Piece {
         let n = rect.area();
         Piece {
             rect,
@@ -84,7 +84,7 @@ impl Piece {
         }
     }
 
-    fn mark_approx(&mut self, i: usize) {
+    pub(crate) fn mark_approx(&mut self, i: usize) {
         if self.approx.is_empty() {
             self.approx = vec![false; self.color.len()];
         }
@@ -205,18 +205,6 @@ impl Frame {
         Frame::blank(w, h, aovs)
     }
 
-    /// A `w` x `h` frame to put pieces into that reuses this one's buffers when its size and
-    /// AOVs match (no fresh pages to fault in), else a new one. Its pixels are stale: every
-    /// pixel must be put again.
-    pub fn recycle(mut self, w: u32, h: u32, aovs: bool) -> Frame {
-        if (self.image.width, self.image.height) != (w, h) || self.depth.is_empty() == aovs || !self.done.is_empty() {
-            return Frame::new(w, h, aovs);
-        }
-        self.approx.clear();
-        (self.filled, self.rays, self.jobs) = (0, 0, JobStats::default());
-        self
-    }
-
     /// Copies `p` into its place (its rays counted). Panics if the piece lies outside the
     /// frame or its AOVs do not match the frame's.
     pub fn put(&mut self, p: &Piece) {
@@ -235,7 +223,7 @@ impl Frame {
             }
             if !p.approx.is_empty() {
                 if self.approx.is_empty() {
-                    self.approx.resize((w * h) as usize, false);
+                    self.approx = vec![false; (w * h) as usize];
                 }
                 self.approx[dst].copy_from_slice(&p.approx[src]);
             }
@@ -262,40 +250,5 @@ mod tests {
             }
             assert!(seen.iter().all(|&c| c == 1), "{w}x{h}");
         }
-    }
-
-    /// Pieces of value `v` covering a `w` x `h` frame, the first one with a stand-in pixel
-    /// when `approx`.
-    fn pieces(w: u32, h: u32, v: f32, approx: bool) -> Vec<Piece> {
-        let mut ps: Vec<Piece> = Rect::tiles(w, h).into_iter().map(|r| Piece::blank(r, true)).collect();
-        for p in &mut ps {
-            p.color.iter_mut().for_each(|c| *c = [v, v + 1.0, v + 2.0]);
-            p.depth.iter_mut().for_each(|d| *d = v);
-            p.rays = 3;
-        }
-        if approx {
-            ps[0].mark_approx(0);
-        }
-        ps
-    }
-
-    #[test]
-    fn a_recycled_frame_equals_a_new_one() {
-        let (w, h) = (70, 40);
-        let mut old = Frame::new(w, h, true);
-        pieces(w, h, 1.0, true).iter().for_each(|p| old.put(p));
-        assert!(old.is_approx(0));
-        let mut fresh = Frame::new(w, h, true);
-        let mut again = old.recycle(w, h, true);
-        for p in pieces(w, h, 5.0, false) {
-            fresh.put(&p);
-            again.put(&p);
-        }
-        assert_eq!(again.image.pixels, fresh.image.pixels);
-        assert_eq!(again.depth, fresh.depth);
-        assert_eq!((again.rays, again.approx.len()), (fresh.rays, 0));
-        // Another size or other AOVs: a new frame.
-        assert_eq!(again.clone().recycle(w, h + 1, true).image.height, h + 1);
-        assert!(again.recycle(w, h, false).depth.is_empty());
     }
 }
