@@ -692,10 +692,9 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     // own share of the tiles over the pool.
     let acc = match cluster.as_mut() {
         Some(c) => {
-            // The other ranks begin each frame while this one accumulates the last, unless
-            // the level of detail may change between frames (the governor, with a budget).
-            let steady = pager.is_none() || a.lod_error <= 0.0 || scene.header().lod_part_count == 0;
-            let more = |i: u32| steady && stop.time.is_none() && stop.frames.is_some_and(|n| i + 1 < n);
+            // The other ranks begin each frame while this one finishes the last (a frame
+            // whose level of detail the governor then changes is begun again).
+            let more = |i: u32| stop.time.is_none() && stop.frames.is_some_and(|n| i + 1 < n);
             let frame = |i, acc: &mut Accumulator| c.accumulate_frame(&renderer, &tracer, &pool, i, acc, more(i));
             render_progressive_with(&renderer, &tracer, stop, frame, &mut on_frame)?
         }
