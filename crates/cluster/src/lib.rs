@@ -3,7 +3,8 @@
 //! Every rank opens the same scene file itself (checked by its header checksum when the
 //! session starts, [`Cluster::join`]) and pages it within its own budget. Rank 0 (the root)
 //! owns the frame: it hands out 32x32 tiles on demand ([`Cluster::render_frame`]), renders
-//! some itself on a thread of its own, and puts the pieces together; the other ranks
+//! some itself on a thread of its own, and puts the pieces together (or adds them to an
+//! accumulator as they come, [`Cluster::accumulate_frame`]); the other ranks
 //! ([`Cluster::serve`]) render what they are given and send it back. A pixel is a pure
 //! function of (pixel, frame), so the frame equals, bit for bit, the one a single process
 //! renders.
