@@ -1,6 +1,6 @@
 //! `mpirun -n 2 megaray render ...` (the `mpi` feature; run with
 //! `cargo test --release -p megaray --features mpi --test mpi`, which needs `mpirun`): the
-//! same PNG, byte for byte, as one process; a rank killed or stopped mid-frame ends or
+//! same PNG, byte for byte, as one process (a timed run too); a rank killed or stopped mid-frame ends or
 //! finishes the job within the timeout, in one line naming it; a rank with another scene
 //! file refuses to start.
 #![cfg(feature = "mpi")]
@@ -60,6 +60,30 @@ fn two_ranks_write_the_same_png_as_one_process() {
         assert!(v["cluster"]["root_tile_share"].as_f64().unwrap() < 1.0, "rank 1 rendered nothing: {v}");
         assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "{extra:?}: the images differ");
     }
+}
+
+#[test]
+fn a_timed_run_across_two_ranks_equals_one_process_with_as_many_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = scene(dir.path());
+    let bin = bin();
+    let two = dir.path().join("two.png").to_string_lossy().into_owned();
+    let common = ["--res", "96x64", "--threads", "1", "-q", "--shader", "env", "--sky", "sky:width=64"];
+    let mut args = vec!["-n", "2", bin.to_str().unwrap(), "render", &s, "-o", &two, "--json", "--time", "0.5"];
+    args.extend(common);
+    let out = mpirun(&args).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let frames = v["frames"].as_u64().unwrap();
+    assert!(frames > 1, "{v}");
+    // Rank 0 decided when to stop; one process given that many frames makes the same image.
+    let one = dir.path().join("one.png").to_string_lossy().into_owned();
+    let n = frames.to_string();
+    let mut args = vec!["render", &s, "-o", &one, "--frames", &n];
+    args.extend(common);
+    let (code, _, err) = run(&args);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "{frames} frames: the images differ");
 }
 
 /// The pid of rank `rank` among the children of the launcher `launcher` (by the rank
