@@ -16,6 +16,21 @@ pub fn temp_path(path: &Path) -> Option<PathBuf> {
     Some(dir.join(format!(".{name}.tmp-{}", std::process::id())))
 }
 
+/// Bytes free for an unprivileged writer on the file system that holds `dir`, if the
+/// system says (`statvfs`).
+pub fn free_space(dir: &Path) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        let s = rustix::fs::statvfs(dir).ok()?;
+        Some(s.f_bavail.saturating_mul(s.f_frsize))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        None
+    }
+}
+
 /// The prefix for this process's build folders: `.megaray-build-<pid>-`.
 pub fn build_dir_prefix() -> String {
     format!("{BUILD_DIR_PREFIX}{}-", std::process::id())

@@ -34,6 +34,7 @@ pub mod bvh;
 pub mod lod;
 pub mod objects;
 pub mod sink;
+pub mod space;
 pub mod split;
 pub mod stream;
 pub mod tiles;
@@ -50,6 +51,7 @@ use megaray_scene::{BlobRef, PartBlob, SceneWriter};
 pub use crate::bvh::Quality;
 use crate::bvh::{build_bvh, build_bvh_of, BvhConfig, Kid};
 pub use crate::objects::{pbrt_input, InstancePlan, ObjectInput, ObjectSource, SceneInput};
+pub use crate::space::check_space;
 use crate::stream::{StreamFile, StreamReader, StreamTri};
 
 /// The most triangles a leaf holds: two blocks of four, when the SAH finds that cheaper than
@@ -86,6 +88,8 @@ pub struct BuildOptions {
     /// Levels of detail made for each part ([`lod`]); `None`: none (the scene then holds
     /// exactly the full-detail parts).
     pub lod: Option<lod::LodOptions>,
+    /// Where temporary files go (a folder is made in it); `None`: the output's folder.
+    pub tmp_dir: Option<PathBuf>,
     /// Set it from another thread (a Ctrl-C handler) to stop the build; it then returns
     /// [`BuildError::Cancelled`] and removes its temporary files.
     pub cancel: Arc<AtomicBool>,
@@ -102,6 +106,7 @@ impl Default for BuildOptions {
             import_mem: None,
             quality: Quality::High,
             lod: Some(lod::LodOptions::default()),
+            tmp_dir: None,
             cancel: Arc::new(AtomicBool::new(false)),
         }
     }
@@ -165,6 +170,8 @@ pub enum BuildError {
     Invalid(String),
     #[error("interrupted; temporary files removed")]
     Cancelled,
+    #[error("{}: not enough free space for {what} of about {tris} triangles: needs about {}, has {} (`--tmp DIR` puts the temporary files elsewhere)", dir.display(), megaray_base::format_size(*need), megaray_base::format_size(*free))]
+    NoSpace { dir: PathBuf, what: &'static str, tris: u64, need: u64, free: u64 },
 }
 
 impl BuildError {
@@ -212,13 +219,13 @@ pub fn build_objects(
         )));
     }
     let t0 = Instant::now();
-    let out_dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let tmp_dir = space::temp_dir_for(out, opts);
     // Build folders of killed builds here are removed (megaray_base::temp).
-    megaray_base::temp::clean_stale(out_dir);
+    megaray_base::temp::clean_stale(&tmp_dir);
     let tmp = tempfile::Builder::new()
         .prefix(&megaray_base::temp::build_dir_prefix())
-        .tempdir_in(out_dir)
-        .map_err(|e| BuildError::io(out_dir, "create a temporary folder in", e))?;
+        .tempdir_in(&tmp_dir)
+        .map_err(|e| BuildError::io(&tmp_dir, "create a temporary folder in", e))?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads.max(1))
         // The in-core builder recurses once per tree level; unbalanced inputs make deep trees.

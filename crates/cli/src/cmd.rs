@@ -121,9 +121,10 @@ pub enum QualityArg {
 #[derive(Args)]
 pub struct BuildArgs {
     /// Model files: .ply, .obj, .stl, .gltf, .glb (merged into one scene), or gen SPECs
-    /// (e.g. grid:1000; see `megaray gen --help`), generated first into a temporary PLY beside
-    /// the output; or one scene: a .pbrt file, or a .gltf/.glb alone (objects and instances
-    /// kept).
+    /// (e.g. plant:1G; see `megaray gen --help`): specs alone are streamed straight into the
+    /// build, specs among files generated first into a temporary PLY beside the output; or one
+    /// scene: a .pbrt file, or a .gltf/.glb alone (objects and instances kept). The build
+    /// first checks that the file systems have room for it.
     #[arg(required = true, value_name = "INPUT")]
     inputs: Vec<PathBuf>,
     /// The scene file to write.
@@ -148,56 +149,13 @@ pub struct BuildArgs {
     /// back on while tiles load; a few percent of the file).
     #[arg(long)]
     no_lod: bool,
+    /// Where temporary files go (default: beside the output). A model larger than a part
+    /// needs about 96 bytes a triangle there at the peak; the scene file, about 46-55.
+    #[arg(long, value_name = "DIR")]
+    tmp: Option<PathBuf>,
     /// Print the build summary as one JSON object.
     #[arg(long)]
     json: bool,
-}
-
-/// The inputs of a build with each gen SPEC among them (an input that is no file but parses
-/// as a [`GenSpec`]) generated into a temporary PLY beside the output; the PLYs are removed
-/// when this is dropped (after the build, or on its error).
-struct GeneratedInputs {
-    inputs: Vec<PathBuf>,
-    temps: Vec<PathBuf>,
-}
-
-impl GeneratedInputs {
-    fn of(inputs: &[PathBuf], out: &Path, bars: &dyn Progress) -> Result<GeneratedInputs> {
-        let mut g = GeneratedInputs { inputs: Vec::new(), temps: Vec::new() };
-        for input in inputs {
-            let is_model = megaray_import::Format::detect(input).is_ok();
-            let spec = match input.to_str() {
-                Some(text) if !input.exists() && !is_model && text.contains(':') => match text.parse::<GenSpec>() {
-                    Ok(spec) => Some(spec),
-                    Err(e) => bail!("{text}: no such model file, nor a gen spec: {e}"),
-                },
-                _ => None,
-            };
-            let Some(spec) = spec else {
-                g.inputs.push(input.clone());
-                continue;
-            };
-            let name = format!(
-                ".{}.{}.gen.ply",
-                out.file_name().unwrap_or_default().to_string_lossy(),
-                spec.name().replace(':', "-")
-            );
-            let ply = out.with_file_name(name);
-            g.temps.push(ply.clone());
-            megaray_gen::write_ply(&spec, &ply, bars)
-                .with_context(|| format!("{}: cannot generate it", spec.name()))?;
-            g.inputs.push(ply);
-        }
-        Ok(g)
-    }
-}
-
-impl Drop for GeneratedInputs {
-    fn drop(&mut self) {
-        for t in &self.temps {
-            let _ = std::fs::remove_file(t);
-        }
-    }
 }
 
 pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
@@ -213,15 +171,22 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             QualityArg::Medium => Quality::Medium,
         },
         lod: if a.no_lod { None } else { BuildOptions::default().lod },
+        tmp_dir: a.tmp.clone(),
         ..BuildOptions::default()
     };
     let cancel = opts.cancel.clone();
     let _ = ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed));
-    let generated = GeneratedInputs::of(&a.inputs, &a.out, bars)?;
+    let inputs = crate::inputs::BuildInputs::of(&a.inputs, &a.out, bars)?;
     let structured = crate::open::structured_scene(&a.inputs, bars)?;
+    if structured.is_none() {
+        megaray_build::check_space(inputs.estimate_tris(), &a.out, &opts)?;
+    }
     let built = match structured {
         Some(p) => megaray_build::build_objects(megaray_build::pbrt_input(p), &a.out, &opts, bars),
-        None => build_scene(&generated.inputs, &a.out, &opts, bars),
+        None if !inputs.streamed.is_empty() => {
+            megaray_build::build_objects(inputs.streamed_scene(bars), &a.out, &opts, bars)
+        }
+        None => build_scene(&inputs.files, &a.out, &opts, bars),
     };
     let s = built.map_err(|e| {
         // Faults in temporary files name those; say which build they stopped.
@@ -233,7 +198,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             e.context(format!("building {}", a.out.display()))
         }
     })?;
-    drop(generated);
+    drop(inputs);
     bars.finish();
     if a.json {
         println!(
@@ -813,9 +778,6 @@ pub(crate) fn cache_dir(given: Option<PathBuf>) -> PathBuf {
     })
 }
 
-/// The demo's plant (`plant:TRIS`) as a scene file in `dir`, generated and built out of core
-/// (within `build_mem`) unless cached there; says what it does on stderr, the steps numbered
-/// as the demo's.
 /// Builds `inputs` into `out` with the defaults of `megaray build` and `build_mem`.
 pub(crate) fn build_into(inputs: Vec<PathBuf>, out: &Path, build_mem: u64, bars: &dyn Progress) -> Result<()> {
     build(
@@ -827,6 +789,7 @@ pub(crate) fn build_into(inputs: Vec<PathBuf>, out: &Path, build_mem: u64, bars:
             threads: None,
             quality: QualityArg::High,
             no_lod: false,
+            tmp: None,
             json: false,
         },
         bars,

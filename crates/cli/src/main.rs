@@ -8,6 +8,7 @@ mod cluster;
 mod cmd;
 mod fault;
 mod info;
+mod inputs;
 mod open;
 mod paging;
 mod pick;

@@ -1,0 +1,96 @@
+//! Disk space a build needs, checked before it starts ([`check_space`]), so that a build
+//! that cannot fit says so at once instead of failing an hour in.
+//!
+//! The estimate, per triangle: the import writes one positions stream
+//! ([`crate::stream::StreamTri`], 48 bytes); a split pass reads a stream and writes its
+//! children before removing it, so temporary files peak at two streams (96 bytes) while the
+//! model is larger than a part; the scene file takes at least 46 bytes (measured on
+//! plant:100M with levels of detail, `docs/PERF.md`), written while the last parts' streams
+//! (at most one stream in all) still exist.
+
+use std::path::{Path, PathBuf};
+
+use crate::{BuildError, BuildOptions};
+
+/// Bytes per triangle of a positions stream.
+pub const STREAM_BYTES_PER_TRI: u64 = 48;
+/// The fewest bytes per triangle a scene file has taken (levels of detail included).
+pub const SCENE_BYTES_PER_TRI: u64 = 46;
+
+/// What a build of `tris` triangles needs: (peak bytes of temporary files, bytes of the
+/// scene file, peak bytes of both when they share a file system).
+pub fn space_needed(tris: u64, opts: &BuildOptions) -> (u64, u64, u64) {
+    let stream = tris.saturating_mul(STREAM_BYTES_PER_TRI);
+    let temp = if tris > opts.part_limit() { stream.saturating_mul(2) } else { stream };
+    let scene = tris.saturating_mul(SCENE_BYTES_PER_TRI);
+    (temp, scene, temp.max(stream.saturating_add(scene)))
+}
+
+/// The folder a build of `out` keeps its temporary files in: [`BuildOptions::tmp_dir`], or
+/// the output's folder.
+pub fn temp_dir_for(out: &Path, opts: &BuildOptions) -> PathBuf {
+    match &opts.tmp_dir {
+        Some(d) => d.clone(),
+        None => out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf(),
+    }
+}
+
+/// Refuses a build of about `tris` triangles into `out` whose files cannot fit the free space
+/// of their file systems (where the system says how much is free).
+pub fn check_space(tris: u64, out: &Path, opts: &BuildOptions) -> Result<(), BuildError> {
+    let tmp = temp_dir_for(out, opts);
+    let out_dir = temp_dir_for(out, &BuildOptions { tmp_dir: None, ..opts.clone() });
+    let (temp, scene, both) = space_needed(tris, opts);
+    let fs = |d: &Path| std::fs::metadata(d).ok().map(|m| file_system(&m));
+    let shared = fs(&tmp).is_some() && fs(&tmp) == fs(&out_dir);
+    let needs: Vec<(&Path, u64, &str)> = if shared {
+        vec![(&tmp, both, "the temporary files and the scene file")]
+    } else {
+        vec![(&tmp, temp, "the temporary files"), (&out_dir, scene, "the scene file")]
+    };
+    for (dir, need, what) in needs {
+        let Some(free) = megaray_base::temp::free_space(dir) else { continue };
+        if need > free {
+            return Err(BuildError::NoSpace {
+                dir: std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf()),
+                what,
+                tris,
+                need,
+                free,
+            });
+        }
+    }
+    Ok(())
+}
+
+#[cfg(unix)]
+fn file_system(m: &std::fs::Metadata) -> u64 {
+    std::os::unix::fs::MetadataExt::dev(m)
+}
+
+#[cfg(not(unix))]
+fn file_system(_: &std::fs::Metadata) -> u64 {
+    0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_model_larger_than_a_part_needs_two_streams() {
+        let opts = BuildOptions { max_part_tris: Some(1000), ..BuildOptions::default() };
+        assert_eq!(space_needed(1000, &opts), (48_000, 46_000, 94_000));
+        assert_eq!(space_needed(1001, &opts), (96_096, 46_046, 96_096));
+    }
+
+    #[test]
+    fn a_build_larger_than_the_disk_is_refused_naming_the_space() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("x.mray");
+        let opts = BuildOptions::default();
+        assert!(check_space(1000, &out, &opts).is_ok());
+        let e = check_space(u64::MAX / 64, &out, &opts).unwrap_err().to_string();
+        assert!(e.contains(&dir.path().display().to_string()) && e.contains("needs about"), "{e}");
+    }
+}
