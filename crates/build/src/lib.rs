@@ -149,6 +149,8 @@ pub struct BuildSummary {
     /// Bytes read and written in temporary streams.
     pub temp_read: u64,
     pub temp_written: u64,
+    /// The most disk the temporary files took (measured as the split passes went).
+    pub temp_peak: u64,
     pub import_s: f64,
     pub split_s: f64,
     pub parts_s: f64,
@@ -283,6 +285,7 @@ pub fn build_objects(
     }
     let import_s = t0.elapsed().as_secs_f64();
     attrs.finish_writing()?;
+    let import_peak = stream::disk_usage(tmp.path());
 
     // 2. Split each object's stream into parts (objects left empty are dropped).
     let t1 = Instant::now();
@@ -399,6 +402,7 @@ pub fn build_objects(
         input_bytes,
         temp_read: io.read.load(Ordering::Relaxed),
         temp_written: io.written.load(Ordering::Relaxed) + triangles * 48,
+        temp_peak: io.peak.load(Ordering::Relaxed).max(import_peak),
         import_s,
         split_s,
         parts_s,

@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use megaray_base::{Aabb, Progress};
 
-use crate::stream::{StreamFile, StreamReader, StreamTri, StreamWriter};
+use crate::stream::{disk_usage, StreamFile, StreamReader, StreamTri, StreamWriter, RELEASE_STEP};
 use crate::{check_cancel, BuildError, BuildOptions};
 
 /// What the split passes did.
@@ -28,6 +28,9 @@ pub struct IoCount {
     pub written: AtomicU64,
     /// Routing passes over stream files.
     pub passes: AtomicU32,
+    /// The most disk the temporary files took at any look (after each release of a parent's
+    /// blocks, [`StreamReader::release`]).
+    pub peak: AtomicU64,
 }
 
 /// Boxes sampled from the input stream.
@@ -208,9 +211,9 @@ fn route(
     let mut outs = (0..leaves)
         .map(|i| StreamWriter::create(&dir.join(format!("{name}_{i:03}")), CHILD_SAMPLE, CHILD_BUF, s.level + depth))
         .collect::<Result<Vec<_>, _>>()?;
-    let mut r = StreamReader::open(s)?;
+    let mut r = StreamReader::open_consuming(s)?;
     let mut buf = vec![StreamTri { v: [[0.0; 3]; 3], reserved: 0, id: 0 }; CHUNK];
-    let mut k = 0u64;
+    let (mut k, mut since) = (0u64, 0u64);
     loop {
         check_cancel(opts)?;
         let n = r.read(&mut buf)?;
@@ -237,11 +240,19 @@ fn route(
         io.read.fetch_add(n as u64 * 48, Ordering::Relaxed);
         io.written.fetch_add(n as u64 * 48, Ordering::Relaxed);
         progress.inc(n as u64 * 48);
+        since += n as u64 * 48;
+        if since >= RELEASE_STEP {
+            since = 0;
+            r.release();
+            io.peak.fetch_max(disk_usage(dir), Ordering::Relaxed);
+        }
     }
     io.passes.fetch_add(1, Ordering::Relaxed);
     let mut files = Vec::with_capacity(outs.len());
-    for w in outs {
-        let f = w.finish()?;
+    let outs: Vec<StreamFile> = outs.into_iter().map(|w| w.finish()).collect::<Result<_, _>>()?;
+    // The children whole, beside what is left of the parent.
+    io.peak.fetch_max(disk_usage(dir), Ordering::Relaxed);
+    for f in outs {
         if f.count == 0 {
             std::fs::remove_file(&f.path).map_err(|e| BuildError::io(&f.path, "remove", e))?;
         } else {

@@ -141,12 +141,34 @@ pub struct StreamReader {
     path: PathBuf,
     inp: BufReader<File>,
     left: u64,
+    /// Bytes handed out by [`StreamReader::read`], and the prefix of them given back to the
+    /// file system ([`StreamReader::release`]).
+    consumed: u64,
+    released: u64,
+    /// Whether the file is released as it is read (opened for writing; the system can).
+    releasing: bool,
 }
+
+/// The least a [`StreamReader::release`] gives back at once.
+pub const RELEASE_STEP: u64 = 16 << 20;
 
 impl StreamReader {
     pub fn open(s: &StreamFile) -> Result<StreamReader, BuildError> {
         let f = File::open(&s.path).map_err(|e| BuildError::io(&s.path, "open", e))?;
-        Ok(StreamReader { path: s.path.clone(), inp: BufReader::with_capacity(IO_BUF, f), left: s.count })
+        Ok(StreamReader::of(s, f, false))
+    }
+
+    /// Opens `s` to be read once and thrown away: [`StreamReader::release`] gives the disk
+    /// blocks already read back to the file system (a hole punched in the file), so that a
+    /// split pass needs room for the children alone, not for the parent beside them.
+    pub fn open_consuming(s: &StreamFile) -> Result<StreamReader, BuildError> {
+        let f = File::options().read(true).write(true).open(&s.path).map_err(|e| BuildError::io(&s.path, "open", e))?;
+        Ok(StreamReader::of(s, f, cfg!(target_os = "linux")))
+    }
+
+    fn of(s: &StreamFile, f: File, releasing: bool) -> StreamReader {
+        let inp = BufReader::with_capacity(IO_BUF, f);
+        StreamReader { path: s.path.clone(), inp, left: s.count, consumed: 0, released: 0, releasing }
     }
 
     /// Fills `buf` with up to `buf.len()` records; returns how many (0 at the end).
@@ -155,6 +177,45 @@ impl StreamReader {
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut buf[..n]);
         self.inp.read_exact(bytes).map_err(|e| BuildError::io(&self.path, "read", e))?;
         self.left -= n as u64;
+        self.consumed += bytes.len() as u64;
         Ok(n)
     }
+
+    /// On a stream opened with [`StreamReader::open_consuming`], gives back the blocks of
+    /// what has been read, once at least [`RELEASE_STEP`] bytes have gathered; returns
+    /// whether it did. A file system that cannot punch holes keeps them (the build then
+    /// needs more room, as before).
+    pub fn release(&mut self) -> bool {
+        let upto = self.consumed & !4095;
+        if !self.releasing || upto < self.released + RELEASE_STEP {
+            return false;
+        }
+        #[cfg(target_os = "linux")]
+        {
+            use rustix::fs::{fallocate, FallocateFlags};
+            let mode = FallocateFlags::PUNCH_HOLE | FallocateFlags::KEEP_SIZE;
+            if fallocate(self.inp.get_ref(), mode, self.released, upto - self.released).is_err() {
+                self.releasing = false;
+                return false;
+            }
+        }
+        self.released = upto;
+        true
+    }
+}
+
+/// Bytes the files in `dir` (not below it) take on disk: what a build's temporary files use.
+pub fn disk_usage(dir: &Path) -> u64 {
+    let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+    entries.filter_map(|e| e.ok()?.metadata().ok()).filter(|m| m.is_file()).map(|m| allocated(&m)).sum()
+}
+
+#[cfg(unix)]
+fn allocated(m: &std::fs::Metadata) -> u64 {
+    std::os::unix::fs::MetadataExt::blocks(m) * 512
+}
+
+#[cfg(not(unix))]
+fn allocated(m: &std::fs::Metadata) -> u64 {
+    m.len()
 }

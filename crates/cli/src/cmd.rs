@@ -149,8 +149,9 @@ pub struct BuildArgs {
     /// back on while tiles load; a few percent of the file).
     #[arg(long)]
     no_lod: bool,
-    /// Where temporary files go (default: beside the output). A model larger than a part
-    /// needs about 96 bytes a triangle there at the peak; the scene file, about 46-55.
+    /// Where temporary files go (default: beside the output). They peak at about 48 bytes a
+    /// triangle (96 where holes cannot be punched in files as they are read); the scene file
+    /// takes about 46-55.
     #[arg(long, value_name = "DIR")]
     tmp: Option<PathBuf>,
     /// Print the build summary as one JSON object.
@@ -208,7 +209,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
                 "degenerate_dropped": s.degenerate_dropped, "parts": s.parts, "tiles": s.tiles,
                 "lod_parts": s.lod_parts, "lod_bytes": s.lod_bytes,
                 "split_levels": s.split_levels, "split_passes": s.split_passes, "part_limit": s.part_limit, "file_bytes": s.file_bytes,
-                "input_bytes": s.input_bytes, "temp_read": s.temp_read, "temp_written": s.temp_written,
+                "input_bytes": s.input_bytes, "temp_read": s.temp_read, "temp_written": s.temp_written, "temp_peak": s.temp_peak,
                 "import_s": s.import_s, "split_s": s.split_s, "parts_s": s.parts_s, "total_s": s.total_s,
                 "mtris_s": s.triangles as f64 / s.total_s / 1e6,
                 "build_mem": a.build_mem, "peak_rss": megaray_base::peak_rss(),
@@ -237,7 +238,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             );
         }
         eprintln!(
-            "time {:.1} s (import {:.1}, split {:.1}, parts {:.1}), {:.2} M triangles/s; read {} input + {} temp, wrote {} temp + {} scene",
+            "time {:.1} s (import {:.1}, split {:.1}, parts {:.1}), {:.2} M triangles/s; read {} input + {} temp, wrote {} temp + {} scene; temporary files peaked at {}",
             s.total_s,
             s.import_s,
             s.split_s,
@@ -246,7 +247,8 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
             format_size(s.input_bytes),
             format_size(s.temp_read),
             format_size(s.temp_written),
-            format_size(s.file_bytes)
+            format_size(s.file_bytes),
+            format_size(s.temp_peak)
         );
         if let Some(rss) = megaray_base::peak_rss() {
             eprintln!("peak memory {} (budget --build-mem {})", format_size(rss), format_size(a.build_mem));

@@ -18,6 +18,16 @@ fn peak_memory_stays_within_build_mem() {
     // In core this model needs about 2M x 170 bytes = 340 MB.
     assert!(v["parts"].as_u64().unwrap() >= 4, "{v}");
     assert!(rss < (160 << 20) + (32 << 20), "peak RSS {} MiB over the 160 MiB budget + 32 MiB", rss >> 20);
+    // The split passes give each parent's blocks back as they read it: the temporary files
+    // never hold much more than one stream (parent and children whole would be two).
+    let stream = v["triangles"].as_u64().unwrap() * 48;
+    let peak = v["temp_peak"].as_u64().unwrap();
+    if cfg!(target_os = "linux") {
+        assert!(
+            peak >= stream && peak < stream + stream / 4,
+            "temporary files peaked at {peak} for a {stream}-byte stream"
+        );
+    }
 }
 
 /// A gen SPEC is a build input too: the scene equals the one built from the generated PLY,
