@@ -48,6 +48,8 @@ pub const NORMAL: usize = 0;
 pub const UV: usize = 1;
 pub const COLOR: usize = 2;
 pub const MATERIAL: usize = 3;
+/// Kinds of attribute.
+pub const KINDS: usize = 4;
 const REC: [usize; 4] = [12, 24, 12, 4];
 const NAMES: [&str; 4] = ["normals.attr", "uvs.attr", "colors.attr", "materials.attr"];
 

@@ -278,8 +278,11 @@ pub fn build_objects(
         roots.push(sink.end_object()?);
         check_cancel(opts)?;
     }
+    // Split streams keep their triangles' ids only when attributes need them.
+    let child_ids = if sink.has_attributes() { stream::Ids::Stored } else { stream::Ids::Absent };
     let (mut attrs, materials, dropped) = sink.finish()?;
     let triangles: u64 = roots.iter().map(|r| r.count).sum();
+    let import_bytes: u64 = roots.iter().map(StreamFile::bytes).sum();
     if triangles == 0 {
         return Err(BuildError::NoTriangles(first_input.unwrap_or_else(|| out.to_path_buf())));
     }
@@ -291,7 +294,7 @@ pub fn build_objects(
     let t1 = Instant::now();
     let limit = opts.part_limit();
     let io = split::IoCount::default();
-    let to_split: u64 = roots.iter().filter(|r| r.count > limit).map(|r| r.count * 48).sum();
+    let to_split: u64 = roots.iter().filter(|r| r.count > limit).map(StreamFile::bytes).sum();
     progress.stage("split", to_split);
     let mut parts = Vec::new();
     let mut objects = Vec::new();
@@ -304,7 +307,7 @@ pub fn build_objects(
         }
         kept.push(Some(objects.len() as u32));
         let (tri_count, bounds) = (root.count, root.bounds);
-        let mut ps = pool.install(|| split::split(root, limit, opts, &io, progress))?;
+        let mut ps = pool.install(|| split::split(root, limit, child_ids, opts, &io, progress))?;
         // Parts in a spatially coherent order (the order the splits produced them).
         ps.sort_by_key(|p| p.path.clone());
         // Its tree (`root`, `node_count`) is placed below.
@@ -401,7 +404,7 @@ pub fn build_objects(
         file_bytes,
         input_bytes,
         temp_read: io.read.load(Ordering::Relaxed),
-        temp_written: io.written.load(Ordering::Relaxed) + triangles * 48,
+        temp_written: io.written.load(Ordering::Relaxed) + import_bytes,
         temp_peak: io.peak.load(Ordering::Relaxed).max(import_peak),
         import_s,
         split_s,
@@ -496,7 +499,7 @@ fn build_part(
         }
         at += n;
     }
-    io.read.fetch_add(s.count * 48, Ordering::Relaxed);
+    io.read.fetch_add(s.bytes(), Ordering::Relaxed);
     let ids: Vec<u64> = recs.iter().map(|t| t.id).collect();
     let tris: Vec<[[f32; 3]; 3]> = recs.iter().map(|t| t.v).collect();
     drop(recs);

@@ -7,7 +7,7 @@ use megaray_import::{ImportError, Material, TriAttr, TriangleSink};
 use megaray_scene::MaterialDesc;
 
 use crate::attrs::AttrStreams;
-use crate::stream::{StreamFile, StreamTri, StreamWriter};
+use crate::stream::{Ids, StreamFile, StreamTri, StreamWriter};
 use crate::{BuildError, BuildOptions};
 
 pub struct BuildSink<'a> {
@@ -31,7 +31,7 @@ pub struct BuildSink<'a> {
 impl<'a> BuildSink<'a> {
     pub fn new(dir: &Path, opts: &'a BuildOptions) -> Result<BuildSink<'a>, BuildError> {
         Ok(BuildSink {
-            stream: Self::object_stream(dir, 0)?,
+            stream: Self::object_stream(dir, 0, 0)?,
             dir: dir.to_path_buf(),
             objects: 0,
             id_base: 0,
@@ -60,8 +60,15 @@ impl<'a> BuildSink<'a> {
         self.error.take()
     }
 
-    fn object_stream(dir: &Path, k: usize) -> Result<StreamWriter, BuildError> {
-        StreamWriter::create(&dir.join(format!("s{k}")), crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0)
+    /// Object `k`'s import stream, its ids implicit from `id_base`.
+    fn object_stream(dir: &Path, k: usize, id_base: u64) -> Result<StreamWriter, BuildError> {
+        let (path, ids) = (dir.join(format!("s{k}")), Ids::Implicit(id_base));
+        StreamWriter::create(&path, crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0, ids)
+    }
+
+    /// Whether any triangle came with attributes (split streams must then keep their ids).
+    pub fn has_attributes(&self) -> bool {
+        (0..crate::attrs::KINDS).any(|k| self.attrs.has(k))
     }
 
     /// Closes the current object's positions stream and starts the next object's.
@@ -70,9 +77,10 @@ impl<'a> BuildSink<'a> {
             return Err(e);
         }
         self.objects += 1;
-        let next = Self::object_stream(&self.dir, self.objects)?;
+        let base = self.id_base + self.stream.count();
+        let next = Self::object_stream(&self.dir, self.objects, base)?;
         let done = std::mem::replace(&mut self.stream, next).finish()?;
-        self.id_base += done.count;
+        self.id_base = base;
         Ok(done)
     }
 

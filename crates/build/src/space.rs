@@ -1,8 +1,8 @@
 //! Disk space a build needs, checked before it starts ([`check_space`]), so that a build
 //! that cannot fit says so at once instead of failing an hour in.
 //!
-//! The estimate, per triangle: the import writes one positions stream
-//! ([`crate::stream::StreamTri`], 48 bytes); a split pass reads a stream and writes its
+//! The estimate, per triangle (a floor: attribute streams come on top): the import writes
+//! one positions stream (36 bytes, [`crate::stream::Ids`]); a split pass reads a stream and writes its
 //! children, giving the parent's blocks back as it reads them on Linux (a hole punched,
 //! [`crate::stream::StreamReader::release`]), so that temporary files peak at one stream
 //! (plus [`SLACK`]); elsewhere, or on a file system that cannot punch holes, parent and
@@ -14,8 +14,9 @@ use std::path::{Path, PathBuf};
 
 use crate::{BuildError, BuildOptions};
 
-/// Bytes per triangle of a positions stream.
-pub const STREAM_BYTES_PER_TRI: u64 = 48;
+/// Bytes per triangle of a positions stream (48 for the split streams of a model with
+/// attributes).
+pub const STREAM_BYTES_PER_TRI: u64 = 36;
 /// The fewest bytes per triangle a scene file has taken (levels of detail included).
 pub const SCENE_BYTES_PER_TRI: u64 = 46;
 /// Room for what a split pass holds beyond one stream (blocks read and not yet given back,
@@ -90,9 +91,9 @@ mod tests {
     #[test]
     fn a_model_larger_than_a_part_needs_its_stream_and_slack() {
         let opts = BuildOptions { max_part_tris: Some(1000), ..BuildOptions::default() };
-        assert_eq!(space_needed(1000, &opts), (48_000, 46_000, 94_000));
-        let split = if cfg!(target_os = "linux") { 48_048 + SLACK } else { 96_096 };
-        assert_eq!(space_needed(1001, &opts), (split, 46_046, split.max(94_094)));
+        assert_eq!(space_needed(1000, &opts), (36_000, 46_000, 82_000));
+        let split = if cfg!(target_os = "linux") { 36_036 + SLACK } else { 72_072 };
+        assert_eq!(space_needed(1001, &opts), (split, 46_046, split.max(82_082)));
     }
 
     #[test]

@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use megaray_base::{Aabb, Progress};
 
-use crate::stream::{disk_usage, StreamFile, StreamReader, StreamTri, StreamWriter, RELEASE_STEP};
+use crate::stream::{disk_usage, Ids, StreamFile, StreamReader, StreamTri, StreamWriter, RELEASE_STEP};
 use crate::{check_cancel, BuildError, BuildOptions};
 
 /// What the split passes did.
@@ -62,6 +62,7 @@ enum Plan {
 pub fn split(
     s: StreamFile,
     limit: u64,
+    ids: Ids,
     opts: &BuildOptions,
     io: &IoCount,
     progress: &dyn Progress,
@@ -71,13 +72,13 @@ pub fn split(
     }
     check_cancel(opts)?;
     let (plan, leaves, depth) = make_plan(&s, limit, opts.split_fanout.max(2));
-    let children = route(&s, &plan, leaves, depth, opts, io, progress)?;
+    let children = route(&s, &plan, leaves, depth, ids, opts, io, progress)?;
     std::fs::remove_file(&s.path).map_err(|e| BuildError::io(&s.path, "remove", e))?;
     use rayon::prelude::*;
     let parts: Vec<Vec<StreamFile>> = children
         .into_par_iter()
         .with_max_len(1)
-        .map(|c| split(c, limit, opts, io, progress))
+        .map(|c| split(c, limit, ids, opts, io, progress))
         .collect::<Result<_, _>>()?;
     Ok(parts.into_iter().flatten().collect())
 }
@@ -196,12 +197,15 @@ fn choose(boxes: &[Aabb]) -> Option<(usize, f32)> {
     (ext > 0.0).then(|| (axis, cb.min[axis] + ext * 0.5))
 }
 
-/// One pass: every triangle of `s` down the plan into its leaf's file.
+/// One pass: every triangle of `s` down the plan into its leaf's file (records keeping
+/// their ids as `ids` says).
+#[allow(clippy::too_many_arguments)]
 fn route(
     s: &StreamFile,
     plan: &[Plan],
     leaves: u32,
     depth: u32,
+    ids: Ids,
     opts: &BuildOptions,
     io: &IoCount,
     progress: &dyn Progress,
@@ -209,7 +213,9 @@ fn route(
     let name = s.path.file_name().unwrap_or_default().to_string_lossy().into_owned();
     let dir = s.path.parent().expect("stream files live in a folder");
     let mut outs = (0..leaves)
-        .map(|i| StreamWriter::create(&dir.join(format!("{name}_{i:03}")), CHILD_SAMPLE, CHILD_BUF, s.level + depth))
+        .map(|i| {
+            StreamWriter::create(&dir.join(format!("{name}_{i:03}")), CHILD_SAMPLE, CHILD_BUF, s.level + depth, ids)
+        })
         .collect::<Result<Vec<_>, _>>()?;
     let mut r = StreamReader::open_consuming(s)?;
     let mut buf = vec![StreamTri { v: [[0.0; 3]; 3], reserved: 0, id: 0 }; CHUNK];
@@ -237,10 +243,11 @@ fn route(
             k += 1;
             outs[leaf as usize].push(t)?;
         }
-        io.read.fetch_add(n as u64 * 48, Ordering::Relaxed);
-        io.written.fetch_add(n as u64 * 48, Ordering::Relaxed);
-        progress.inc(n as u64 * 48);
-        since += n as u64 * 48;
+        let (read, written) = (n as u64 * s.ids.record_bytes(), n as u64 * ids.record_bytes());
+        io.read.fetch_add(read, Ordering::Relaxed);
+        io.written.fetch_add(written, Ordering::Relaxed);
+        progress.inc(read);
+        since += read;
         if since >= RELEASE_STEP {
             since = 0;
             r.release();

@@ -1,6 +1,10 @@
 //! Triangle stream files: the positions-only, fixed-record files the out-of-core build
-//! splits recursively. Each record is a [`StreamTri`] (48 bytes); the triangle's id keys its
-//! attributes in the separate attribute streams ([`crate::attrs`]).
+//! splits recursively. In memory a record is a [`StreamTri`] (48 bytes: corners and the
+//! triangle's id, which keys its attributes in the separate attribute streams,
+//! [`crate::attrs`]). On disk it is 36 bytes, the corners alone, unless the id must be kept
+//! ([`Ids`]): an object's import stream is in id order, so its ids are implicit, and a model
+//! without attributes needs none; only the split children of a model with attributes carry
+//! the full 48.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -33,6 +37,30 @@ impl StreamTri {
         [(b.min[0] + b.max[0]) * 0.5, (b.min[1] + b.max[1]) * 0.5, (b.min[2] + b.max[2]) * 0.5]
     }
 }
+
+/// What a stream file says of its triangles' ids.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ids {
+    /// Records in id order from `base` (an object's import stream): 36 bytes.
+    Implicit(u64),
+    /// Each record holds its id: 48 bytes.
+    Stored,
+    /// Not needed (no attributes): 36 bytes, ids read as 0.
+    Absent,
+}
+
+impl Ids {
+    /// Bytes of a record on disk.
+    pub fn record_bytes(self) -> u64 {
+        match self {
+            Ids::Stored => 48,
+            Ids::Implicit(_) | Ids::Absent => 36,
+        }
+    }
+}
+
+/// Bytes of the corners alone, the head of a [`StreamTri`].
+const CORNER_BYTES: usize = 36;
 
 /// Buffer size of stream readers and writers.
 pub const IO_BUF: usize = 4 << 20;
@@ -80,6 +108,15 @@ pub struct StreamFile {
     pub sample: Sample,
     /// How many file splits led to this stream (the input stream is level 0).
     pub level: u32,
+    /// Its records' ids, and so their size on disk.
+    pub ids: Ids,
+}
+
+impl StreamFile {
+    /// Bytes of its records on disk.
+    pub fn bytes(&self) -> u64 {
+        self.count * self.ids.record_bytes()
+    }
 }
 
 /// Writes a stream file, keeping its count, bounds, centroid bounds and a sample of its boxes.
@@ -91,10 +128,17 @@ pub struct StreamWriter {
     cbounds: Aabb,
     sample: Sample,
     level: u32,
+    ids: Ids,
 }
 
 impl StreamWriter {
-    pub fn create(path: &Path, sample_cap: usize, buf: usize, level: u32) -> Result<StreamWriter, BuildError> {
+    pub fn create(
+        path: &Path,
+        sample_cap: usize,
+        buf: usize,
+        level: u32,
+        ids: Ids,
+    ) -> Result<StreamWriter, BuildError> {
         let f = File::create(path).map_err(|e| BuildError::io(path, "create", e))?;
         Ok(StreamWriter {
             path: path.to_path_buf(),
@@ -104,6 +148,7 @@ impl StreamWriter {
             cbounds: Aabb::EMPTY,
             sample: Sample::new(sample_cap),
             level,
+            ids,
         })
     }
 
@@ -115,7 +160,9 @@ impl StreamWriter {
         self.cbounds.grow_point(c);
         self.sample.add(&b);
         self.count += 1;
-        self.out.write_all(bytemuck::bytes_of(t)).map_err(|e| BuildError::io(&self.path, "write", e))
+        let bytes = bytemuck::bytes_of(t);
+        let rec = if self.ids == Ids::Stored { bytes } else { &bytes[..CORNER_BYTES] };
+        self.out.write_all(rec).map_err(|e| BuildError::io(&self.path, "write", e))
     }
 
     pub fn count(&self) -> u64 {
@@ -132,6 +179,7 @@ impl StreamWriter {
             cbounds: self.cbounds,
             sample: self.sample,
             level: self.level,
+            ids: self.ids,
         })
     }
 }
@@ -141,6 +189,11 @@ pub struct StreamReader {
     path: PathBuf,
     inp: BufReader<File>,
     left: u64,
+    ids: Ids,
+    /// Records read so far (the ids of an [`Ids::Implicit`] stream).
+    index: u64,
+    /// Corners read from a 36-byte stream, before they become records.
+    scratch: Vec<u8>,
     /// Bytes handed out by [`StreamReader::read`], and the prefix of them given back to the
     /// file system ([`StreamReader::release`]).
     consumed: u64,
@@ -168,16 +221,42 @@ impl StreamReader {
 
     fn of(s: &StreamFile, f: File, releasing: bool) -> StreamReader {
         let inp = BufReader::with_capacity(IO_BUF, f);
-        StreamReader { path: s.path.clone(), inp, left: s.count, consumed: 0, released: 0, releasing }
+        let (left, ids) = (s.count, s.ids);
+        StreamReader {
+            path: s.path.clone(),
+            inp,
+            left,
+            ids,
+            index: 0,
+            scratch: Vec::new(),
+            consumed: 0,
+            released: 0,
+            releasing,
+        }
     }
 
     /// Fills `buf` with up to `buf.len()` records; returns how many (0 at the end).
     pub fn read(&mut self, buf: &mut [StreamTri]) -> Result<usize, BuildError> {
         let n = (buf.len() as u64).min(self.left) as usize;
-        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut buf[..n]);
-        self.inp.read_exact(bytes).map_err(|e| BuildError::io(&self.path, "read", e))?;
+        let bytes = if self.ids == Ids::Stored {
+            let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut buf[..n]);
+            self.inp.read_exact(bytes).map_err(|e| BuildError::io(&self.path, "read", e))?;
+            bytes.len()
+        } else {
+            self.scratch.resize(n * CORNER_BYTES, 0);
+            self.inp.read_exact(&mut self.scratch).map_err(|e| BuildError::io(&self.path, "read", e))?;
+            for (k, (t, rec)) in buf.iter_mut().zip(self.scratch.chunks_exact(CORNER_BYTES)).enumerate() {
+                t.v = bytemuck::pod_read_unaligned(rec);
+                t.id = match self.ids {
+                    Ids::Implicit(base) => base + self.index + k as u64,
+                    _ => 0,
+                };
+            }
+            self.scratch.len()
+        };
         self.left -= n as u64;
-        self.consumed += bytes.len() as u64;
+        self.index += n as u64;
+        self.consumed += bytes as u64;
         Ok(n)
     }
 

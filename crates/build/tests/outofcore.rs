@@ -74,3 +74,75 @@ fn build_memory_bound_sets_part_size_and_degenerates_are_counted() {
     let opts = megaray_build::BuildOptions { build_mem: 1 << 30, threads: 2, ..Default::default() };
     assert_eq!(opts.part_limit(), ((1u64 << 30) - (64 << 20)) / (2 * megaray_build::INCORE_BYTES_PER_TRI));
 }
+
+/// A colour that is a function of a triangle's corners, whatever their order.
+fn colour_of(t: &[[f32; 3]; 3]) -> u8 {
+    let s: f32 = t.iter().flatten().sum();
+    (s.to_bits().wrapping_mul(0x9e37_79b9) >> 24) as u8
+}
+
+/// Split streams of a model with attributes keep each triangle's id (48-byte records; a
+/// model without attributes needs 36): every hit's colour is its own triangle's, in a scene
+/// split into many parts as in one part.
+#[test]
+fn attributes_follow_their_triangles_through_the_splits() {
+    use megaray_build::{ObjectSource, SceneInput};
+    let dir = tempfile::tempdir().unwrap();
+    let n = 100u32;
+    let mut tris = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (x, z) = (i as f32 / n as f32 - 0.5, j as f32 / n as f32 - 0.5);
+            let y = |a: f32, b: f32| 0.1 * (7.0 * a).sin() * (5.0 * b).cos();
+            let d = 1.0 / n as f32;
+            let p = |a: f32, b: f32| [a, y(a, b), b];
+            tris.push([p(x, z), p(x + d, z), p(x, z + d)]);
+            tris.push([p(x + d, z), p(x + d, z + d), p(x, z + d)]);
+        }
+    }
+    let build = |name: &str, max_part: Option<u64>| {
+        let tris = tris.clone();
+        let source = ObjectSource::Fn(Box::new(move |sink| {
+            for t in &tris {
+                let c = colour_of(t) as f32 / 255.0;
+                let color = Some([[c, 0.0, 0.0, 1.0]; 3]);
+                let attr =
+                    megaray_import::TriAttr { color, material: megaray_import::NO_MATERIAL, ..Default::default() };
+                sink.triangle(*t, &attr)?;
+            }
+            Ok(())
+        }));
+        let out = dir.path().join(format!("{name}.mray"));
+        let opts =
+            megaray_build::BuildOptions { max_part_tris: Some(max_part.unwrap_or(1 << 20)), ..Default::default() };
+        let s =
+            megaray_build::build_objects(SceneInput::plain(source), &out, &opts, &megaray_base::NoProgress).unwrap();
+        (out, s)
+    };
+    let (one, s1) = build("one", None);
+    let (many, s2) = build("many", Some(1_000));
+    assert_eq!((s1.parts, s2.triangles), (1, 20_000));
+    assert!(s2.parts >= 16 && s2.split_levels >= 1, "{} parts", s2.parts);
+    for path in [&one, &many] {
+        let scene = Scene::open(path).unwrap();
+        let cam = Camera::framing(&scene.header().bounds, Vec3::new(0.2, 1.0, 0.4), 120, 90);
+        let tracer = Tracer::new(&scene);
+        let mut seen = 0;
+        for i in 0..120 * 90 {
+            let Some(h) = tracer.intersect(&cam.ray((i % 120) as f32 + 0.5, (i / 120) as f32 + 0.5)) else { continue };
+            let c = scene.colors(h.part, h.prim).expect("colours kept");
+            let want = (colour_of(&h.tri) as f32 / 255.0 * 255.0).round() as u8;
+            assert!(
+                c[0][0].abs_diff(want) <= 1,
+                "{}: part {} prim {}: colour {} for {}",
+                path.display(),
+                h.part,
+                h.prim,
+                c[0][0],
+                want
+            );
+            seen += 1;
+        }
+        assert!(seen > 1000, "{seen} hits");
+    }
+}

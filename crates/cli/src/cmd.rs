@@ -149,9 +149,9 @@ pub struct BuildArgs {
     /// back on while tiles load; a few percent of the file).
     #[arg(long)]
     no_lod: bool,
-    /// Where temporary files go (default: beside the output). They peak at about 48 bytes a
-    /// triangle (96 where holes cannot be punched in files as they are read); the scene file
-    /// takes about 46-55.
+    /// Where temporary files go (default: beside the output). They peak at about 36 bytes a
+    /// triangle (72 where holes cannot be punched in files as they are read; more with
+    /// attributes); the scene file takes about 46-55.
     #[arg(long, value_name = "DIR")]
     tmp: Option<PathBuf>,
     /// Print the build summary as one JSON object.

@@ -20,7 +20,7 @@ fn peak_memory_stays_within_build_mem() {
     assert!(rss < (160 << 20) + (32 << 20), "peak RSS {} MiB over the 160 MiB budget + 32 MiB", rss >> 20);
     // The split passes give each parent's blocks back as they read it: the temporary files
     // never hold much more than one stream (parent and children whole would be two).
-    let stream = v["triangles"].as_u64().unwrap() * 48;
+    let stream = v["triangles"].as_u64().unwrap() * 36;
     let peak = v["temp_peak"].as_u64().unwrap();
     if cfg!(target_os = "linux") {
         assert!(
