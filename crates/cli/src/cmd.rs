@@ -291,7 +291,7 @@ pub struct RenderArgs {
     /// Primary samples per pixel per frame (the first frame's first sample is the pixel centre).
     #[arg(long, value_name = "N", default_value_t = 1)]
     spp: u32,
-    /// Shader: normal, diffuse, phong, mirror, glass, ao, env, auto (by material).
+    /// Shader: normal, diffuse, phong, mirror, glass, ao, env, path, auto (by material).
     #[arg(long, value_name = "NAME", default_value = "auto")]
     shader: String,
     /// Environment light: a lat-long Radiance .hdr or OpenEXR .exr map.

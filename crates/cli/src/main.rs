@@ -77,11 +77,12 @@ enum Command {
     ///
     /// Shaders (--shader): normal, diffuse (lights, shadows), phong (highlights), mirror and
     /// glass (recursive, --max-depth), ao (ambient occlusion), env (diffuse under the
-    /// environment), auto (by material; the default). Lights: the directional --light, or an
-    /// environment (--env map or --sky procedural sky) turned into --env-lights virtual
-    /// directional lights, split into --light-subsets subsets over 4x4 pixel tiles
-    /// (interleaved sampling), --light-samples shadow rays per hit. --frames / --time
-    /// accumulate frames progressively (new sample positions each).
+    /// environment), path (global illumination: bounces, next-event estimation from the
+    /// environment, multiple importance sampling), auto (by material; the default). Lights:
+    /// the directional --light, or an environment (--env map or --sky procedural sky) turned
+    /// into --env-lights virtual directional lights, split into --light-subsets subsets over
+    /// 4x4 pixel tiles (interleaved sampling), --light-samples shadow rays per hit. --frames /
+    /// --time accumulate frames progressively (new sample positions each).
     ///
     /// Examples:
     ///   megaray render plant.mray -o plant.png --res 1920x1080 --spp 4

@@ -1,0 +1,205 @@
+#!/usr/bin/env python3
+"""The `path` shader against Mitsuba 3 (a renderer no one here wrote) on the same scene.
+
+Writes the scene's geometry (OBJ + MTL) and a constant sky (a Radiance .hdr), builds and renders
+it with megaray (`--shader path`), renders it with Mitsuba 3 (`scalar_rgb`, the `path` integrator,
+a `constant` emitter, box pixel filter), and compares the two linear images: the mean absolute
+difference as a fraction of Mitsuba's mean pixel value, and the mean FLIP error of the
+tone-mapped images when flip-evaluator is installed. One JSON line per scene.
+
+    python3 compare.py [--megaray BIN] [--res 160x120] [--frames 1024] [--spp 4096]
+                       [--scene box|all] [--save-reference] [--check 0.03]
+
+--save-reference writes Mitsuba's image beside this script (`<scene>-mitsuba.exr`) with the
+scene as megaray reads it (`<scene>.obj`, `.mtl`, `sky.hdr`): the reference the Rust test
+`crates/cli/tests/mitsuba.rs` compares megaray with, Mitsuba or not. Needs `pip install mitsuba` (and numpy, which it brings).
+"""
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def box_scene():
+    """An open box (floor, back and side walls, albedo 0.7 / 0.6 / 0.3 tints) with a diffuse
+    sphere (albedo 0.5) inside, under a constant sky of radiance 1; camera looking in."""
+    quads = {
+        "floor": ([(-1, 0, -1), (1, 0, -1), (1, 0, 1), (-1, 0, 1)], (0.7, 0.7, 0.7)),
+        "back": ([(-1, 0, -1), (-1, 2, -1), (1, 2, -1), (1, 0, -1)], (0.7, 0.7, 0.7)),
+        "left": ([(-1, 0, -1), (-1, 0, 1), (-1, 2, 1), (-1, 2, -1)], (0.7, 0.25, 0.2)),
+        "right": ([(1, 0, -1), (1, 2, -1), (1, 2, 1), (1, 0, 1)], (0.2, 0.3, 0.7)),
+    }
+    meshes = []
+    for name, (q, kd) in quads.items():
+        # Both sides: the walls are seen from inside and lit from outside.
+        meshes.append((name, kd, q, [(0, 1, 2), (0, 2, 3), (0, 2, 1), (0, 3, 2)]))
+    # A UV sphere, centre (0.2, 0.45, 0.1), radius 0.45.
+    verts, faces = [], []
+    n_lat, n_lon = 24, 48
+    for i in range(n_lat + 1):
+        th = math.pi * i / n_lat
+        for j in range(n_lon):
+            ph = 2 * math.pi * j / n_lon
+            verts.append((0.2 + 0.45 * math.sin(th) * math.cos(ph), 0.45 + 0.45 * math.cos(th),
+                          0.1 + 0.45 * math.sin(th) * math.sin(ph)))
+    for i in range(n_lat):
+        for j in range(n_lon):
+            a, b = i * n_lon + j, i * n_lon + (j + 1) % n_lon
+            c, d = a + n_lon, b + n_lon
+            if i > 0:
+                faces.append((a, b, c))
+            if i < n_lat - 1:
+                faces.append((b, d, c))
+    meshes.append(("sphere", (0.5, 0.5, 0.5), verts, faces))
+    camera = {"eye": (0.0, 1.3, 4.2), "at": (0.0, 0.8, 0.0), "fov": 40.0}
+    return meshes, camera, 1.0
+
+
+SCENES = {"box": box_scene}
+
+
+def write_obj(meshes, path):
+    """One OBJ with a material per mesh (megaray), and one OBJ per mesh (Mitsuba)."""
+    mtl = path[:-4] + ".mtl"
+    with open(mtl, "w") as m:
+        for name, kd, _, _ in meshes:
+            m.write(f"newmtl {name}\nKd {kd[0]} {kd[1]} {kd[2]}\n")
+    parts = []
+    with open(path, "w") as o:
+        o.write(f"mtllib {os.path.basename(mtl)}\n")
+        base = 1
+        for name, kd, verts, faces in meshes:
+            o.write(f"o {name}\nusemtl {name}\n")
+            for v in verts:
+                o.write("v %.9g %.9g %.9g\n" % v)
+            for f in faces:
+                o.write("f %d %d %d\n" % (f[0] + base, f[1] + base, f[2] + base))
+            base += len(verts)
+            one = path[:-4] + f"-{name}.obj"
+            with open(one, "w") as s:
+                for v in verts:
+                    s.write("v %.9g %.9g %.9g\n" % v)
+                for f in faces:
+                    s.write("f %d %d %d\n" % (f[0] + 1, f[1] + 1, f[2] + 1))
+            parts.append((one, kd))
+    return parts
+
+
+def write_constant_hdr(path, radiance):
+    """An 8x4 lat-long Radiance map of constant `radiance` (flat RGBE pixels)."""
+    m, e = math.frexp(radiance)
+    px = bytes([int(m * 256), int(m * 256), int(m * 256), e + 128])
+    with open(path, "wb") as f:
+        f.write(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 8\n")
+        f.write(px * 32)
+
+
+def render_megaray(binary, tmp, obj, hdr, camera, res, frames):
+    scene = os.path.join(tmp, "scene.mray")
+    subprocess.run([binary, "build", obj, "-o", scene, "-q"], check=True)
+    out = os.path.join(tmp, "megaray.exr")
+    c = camera
+    args = [binary, "render", scene, "-o", out, "-q", "--json", "--shader", "path", "--env", hdr,
+            "--res", res, "--frames", str(frames), "--max-depth", "64", "--fov", str(c["fov"]),
+            "--eye", ",".join(map(str, c["eye"])), "--at", ",".join(map(str, c["at"]))]
+    t = time.time()
+    subprocess.run(args, check=True, stdout=subprocess.DEVNULL)
+    return out, time.time() - t
+
+
+def render_mitsuba(parts, camera, res, spp, radiance, out):
+    import mitsuba as mi
+    mi.set_variant("scalar_rgb")
+    w, h = map(int, res.split("x"))
+    c = camera
+    scene = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": 64},
+        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [radiance] * 3}},
+        "camera": {
+            "type": "perspective", "fov": c["fov"], "fov_axis": "y",
+            "to_world": mi.ScalarTransform4f().look_at(origin=c["eye"], target=c["at"], up=[0, 1, 0]),
+            "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent", "sample_count": spp},
+        },
+    }
+    for k, (path, kd) in enumerate(parts):
+        scene[f"shape{k}"] = {
+            "type": "obj", "filename": path, "face_normals": True,
+            "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(kd)}}},
+        }
+    t = time.time()
+    img = mi.render(mi.load_dict(scene))
+    secs = time.time() - t
+    mi.Bitmap(img).write(out)
+    return secs
+
+
+def read_exr(path):
+    import mitsuba as mi
+    import numpy as np
+    mi.set_variant("scalar_rgb")
+    return np.array(mi.Bitmap(path).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, False))
+
+
+def compare(ref_path, test_path):
+    import numpy as np
+    ref, test = read_exr(ref_path).astype(np.float64), read_exr(test_path).astype(np.float64)
+    out = {"mean_abs_diff_rel": float(np.abs(ref - test).mean() / max(ref.mean(), 1e-12)),
+           "mean_ref": float(ref.mean()), "mean_test": float(test.mean())}
+    try:
+        import flip_evaluator as flip
+        tone = lambda x: np.clip(x, 0, 1) ** (1 / 2.2)
+        _, mean, _ = flip.evaluate(tone(ref).astype(np.float32), tone(test).astype(np.float32), "LDR")
+        out["flip"] = float(mean)
+    except ImportError:
+        pass
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--megaray", default=os.path.join(HERE, "../../../../../target/release/megaray"))
+    ap.add_argument("--res", default="160x120")
+    ap.add_argument("--frames", type=int, default=1024)
+    ap.add_argument("--spp", type=int, default=4096)
+    ap.add_argument("--scene", default="all")
+    ap.add_argument("--save-reference", action="store_true")
+    ap.add_argument("--check", type=float, metavar="FRACTION",
+                    help="exit 1 if a scene's mean absolute difference is above FRACTION of the mean")
+    a = ap.parse_args()
+    failed = False
+    names = list(SCENES) if a.scene == "all" else [a.scene]
+    for name in names:
+        meshes, camera, radiance = SCENES[name]()
+        with tempfile.TemporaryDirectory() as tmp:
+            obj = os.path.join(tmp, f"{name}.obj")
+            parts = write_obj(meshes, obj)
+            hdr = os.path.join(tmp, "sky.hdr")
+            write_constant_hdr(hdr, radiance)
+            ours, ours_s = render_megaray(a.megaray, tmp, obj, hdr, camera, a.res, a.frames)
+            if a.save_reference:
+                # The scene as megaray reads it, for the Rust test.
+                for f in (obj, obj[:-4] + ".mtl", hdr):
+                    with open(f, "rb") as src, open(os.path.join(HERE, os.path.basename(f)), "wb") as dst:
+                        dst.write(src.read())
+            ref = os.path.join(HERE, f"{name}-mitsuba.exr") if a.save_reference else os.path.join(tmp, "mitsuba.exr")
+            mi_s = render_mitsuba(parts, camera, a.res, a.spp, radiance, ref)
+            r = compare(ref, ours)
+            r.update({"scene": name, "res": a.res, "megaray_frames": a.frames, "megaray_s": round(ours_s, 2),
+                      "mitsuba_spp": a.spp, "mitsuba_s": round(mi_s, 2)})
+            print(json.dumps(r))
+            if a.check is not None and r["mean_abs_diff_rel"] > a.check:
+                print(f"{name}: megaray and Mitsuba differ by {100 * r['mean_abs_diff_rel']:.2f} % of the mean", file=sys.stderr)
+                failed = True
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
