@@ -61,7 +61,15 @@ def box_scene():
     return meshes, camera, 1.0
 
 
-SCENES = {"box": box_scene}
+def glass_scene():
+    """The open box with the sphere made of clear glass (index 1.5)."""
+    meshes, camera, radiance = box_scene()
+    name, _, verts, faces = meshes[-1]
+    meshes[-1] = ("glass", "glass", verts, faces)
+    return meshes, camera, radiance
+
+
+SCENES = {"box": box_scene, "glass": glass_scene}
 
 
 def write_obj(meshes, path):
@@ -69,7 +77,11 @@ def write_obj(meshes, path):
     mtl = path[:-4] + ".mtl"
     with open(mtl, "w") as m:
         for name, kd, _, _ in meshes:
-            m.write(f"newmtl {name}\nKd {kd[0]} {kd[1]} {kd[2]}\n")
+            if kd == "glass":
+                # Opacity below 1 is megaray's glass (index 1.5).
+                m.write(f"newmtl {name}\nKd 1 1 1\nd 0\n")
+            else:
+                m.write(f"newmtl {name}\nKd {kd[0]} {kd[1]} {kd[2]}\n")
     parts = []
     with open(path, "w") as o:
         o.write(f"mtllib {os.path.basename(mtl)}\n")
@@ -130,10 +142,12 @@ def render_mitsuba(parts, camera, res, spp, radiance, out):
         },
     }
     for k, (path, kd) in enumerate(parts):
-        scene[f"shape{k}"] = {
-            "type": "obj", "filename": path, "face_normals": True,
-            "bsdf": {"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(kd)}}},
-        }
+        if kd == "glass":
+            bsdf = {"type": "dielectric", "int_ior": 1.5, "ext_ior": 1.0}
+        else:
+            diffuse = {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(kd)}}
+            bsdf = {"type": "twosided", "bsdf": diffuse}
+        scene[f"shape{k}"] = {"type": "obj", "filename": path, "face_normals": True, "bsdf": bsdf}
     t = time.time()
     img = mi.render(mi.load_dict(scene))
     secs = time.time() - t
