@@ -22,7 +22,7 @@ fn against_mitsuba(name: &str) -> (f64, f64) {
     let (code, _, err) = run(&["build", &data(&format!("{name}.obj")), "-o", &scene, "-q"]);
     assert_eq!(code, 0, "{err}");
     let out = dir.path().join("s.exr").to_string_lossy().into_owned();
-    let sky = data("sky.hdr");
+    let sky = data(&format!("{name}-sky.hdr"));
     let args = [
         "render",
         &scene,
@@ -60,12 +60,13 @@ fn against_mitsuba(name: &str) -> (f64, f64) {
 }
 
 /// Measured after 256 frames: 0.9 % (box) and 1.2 % (glass), mostly noise (0.2 % and 0.3 %
-/// after 4,096); bias under 0.1 %.
+/// after 4,096); bias under 0.1 %. Under the sky with a sun: 1.75 % after 4,096 frames, the
+/// mean 1.2 % low (the map's sun read piecewise constant here, bilinear there).
 #[test]
-fn the_path_shader_matches_mitsuba_on_the_open_box_and_the_glass_sphere() {
-    for name in ["box", "glass"] {
+fn the_path_shader_matches_mitsuba_on_the_open_box_the_glass_sphere_and_the_sun() {
+    for (name, most, bias_most) in [("box", 0.02, 0.005), ("glass", 0.02, 0.005), ("sun", 0.04, 0.02)] {
         let (mad, bias) = against_mitsuba(name);
-        assert!(mad < 0.02, "{name}: mean absolute difference {:.2} % of the mean", 100.0 * mad);
-        assert!(bias.abs() < 0.005, "{name}: mean off by {:.2} %", 100.0 * bias);
+        assert!(mad < most, "{name}: mean absolute difference {:.2} % of the mean", 100.0 * mad);
+        assert!(bias.abs() < bias_most, "{name}: mean off by {:.2} %", 100.0 * bias);
     }
 }

@@ -11,7 +11,7 @@ tone-mapped images when flip-evaluator is installed. One JSON line per scene.
                        [--scene box|all] [--save-reference] [--check 0.03]
 
 --save-reference writes Mitsuba's image beside this script (`<scene>-mitsuba.exr`) with the
-scene as megaray reads it (`<scene>.obj`, `.mtl`, `sky.hdr`): the reference the Rust test
+scene as megaray reads it (`<scene>.obj`, `.mtl`, `-sky.hdr`): the reference the Rust test
 `crates/cli/tests/mitsuba.rs` compares megaray with, Mitsuba or not. Needs `pip install mitsuba` (and numpy, which it brings).
 """
 import argparse
@@ -69,7 +69,19 @@ def glass_scene():
     return meshes, camera, radiance
 
 
-SCENES = {"box": box_scene, "glass": glass_scene}
+def sun_scene():
+    """The open box with the diffuse sphere under a sky map with a sun: radiance 0.5 everywhere
+    and 2,000 in a 2x2-pixel patch of a 64x32 map (about 45 degrees up), so that shadows and
+    the importance sampling of a small bright source are compared too."""
+    meshes, camera, _ = box_scene()
+    sky = [[0.5] * 64 for _ in range(32)]
+    for y in (8, 9):
+        for x in (20, 21):
+            sky[y][x] = 2000.0
+    return meshes, camera, sky
+
+
+SCENES = {"box": box_scene, "glass": glass_scene, "sun": sun_scene}
 
 
 def write_obj(meshes, path):
@@ -103,13 +115,20 @@ def write_obj(meshes, path):
     return parts
 
 
-def write_constant_hdr(path, radiance):
-    """An 8x4 lat-long Radiance map of constant `radiance` (flat RGBE pixels)."""
-    m, e = math.frexp(radiance)
-    px = bytes([int(m * 256), int(m * 256), int(m * 256), e + 128])
+def rgbe(v):
+    m, e = math.frexp(v)
+    return bytes([int(m * 256)] * 3 + [e + 128])
+
+
+def write_sky_hdr(path, sky):
+    """A lat-long Radiance map (flat RGBE pixels, grey): `sky` is a constant radiance (an
+    8x4 map) or rows of radiances. Row 0 is straight up; column u looks along
+    (cos 2 pi u, ., sin 2 pi u), megaray's convention (`EnvMap::eval`)."""
+    rows = [[sky] * 8 for _ in range(4)] if isinstance(sky, (int, float)) else sky
     with open(path, "wb") as f:
-        f.write(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 8\n")
-        f.write(px * 32)
+        f.write(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y %d +X %d\n" % (len(rows), len(rows[0])))
+        for row in rows:
+            f.write(b"".join(rgbe(v) for v in row))
 
 
 def render_megaray(binary, tmp, obj, hdr, camera, res, frames):
@@ -125,7 +144,7 @@ def render_megaray(binary, tmp, obj, hdr, camera, res, frames):
     return out, time.time() - t
 
 
-def render_mitsuba(parts, camera, res, spp, radiance, out):
+def render_mitsuba(parts, camera, res, spp, radiance, out, sky_file=None):
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
     w, h = map(int, res.split("x"))
@@ -133,7 +152,12 @@ def render_mitsuba(parts, camera, res, spp, radiance, out):
     scene = {
         "type": "scene",
         "integrator": {"type": "path", "max_depth": 64},
-        "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [radiance] * 3}},
+        "sky": ({"type": "constant", "radiance": {"type": "rgb", "value": [radiance] * 3}}
+                if isinstance(radiance, (int, float)) else
+                # The same map, turned so that Mitsuba's (atan2(x, -z), acos y) mapping reads it
+                # as megaray's (atan2(z, x), acos y) does.
+                {"type": "envmap", "filename": sky_file,
+                 "to_world": mi.ScalarTransform4f([[0, 0, -1, 0], [0, 1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 1]])}),
         "camera": {
             "type": "perspective", "fov": c["fov"], "fov_axis": "y",
             "to_world": mi.ScalarTransform4f().look_at(origin=c["eye"], target=c["at"], up=[0, 1, 0]),
@@ -196,15 +220,15 @@ def main():
             obj = os.path.join(tmp, f"{name}.obj")
             parts = write_obj(meshes, obj)
             hdr = os.path.join(tmp, "sky.hdr")
-            write_constant_hdr(hdr, radiance)
+            write_sky_hdr(hdr, radiance)
             ours, ours_s = render_megaray(a.megaray, tmp, obj, hdr, camera, a.res, a.frames)
             if a.save_reference:
                 # The scene as megaray reads it, for the Rust test.
-                for f in (obj, obj[:-4] + ".mtl", hdr):
-                    with open(f, "rb") as src, open(os.path.join(HERE, os.path.basename(f)), "wb") as dst:
+                for f, to in ((obj, None), (obj[:-4] + ".mtl", None), (hdr, f"{name}-sky.hdr")):
+                    with open(f, "rb") as src, open(os.path.join(HERE, to or os.path.basename(f)), "wb") as dst:
                         dst.write(src.read())
             ref = os.path.join(HERE, f"{name}-mitsuba.exr") if a.save_reference else os.path.join(tmp, "mitsuba.exr")
-            mi_s = render_mitsuba(parts, camera, a.res, a.spp, radiance, ref)
+            mi_s = render_mitsuba(parts, camera, a.res, a.spp, radiance, ref, hdr)
             r = compare(ref, ours)
             r.update({"scene": name, "res": a.res, "megaray_frames": a.frames, "megaray_s": round(ours_s, 2),
                       "mitsuba_spp": a.spp, "mitsuba_s": round(mi_s, 2)})
