@@ -278,9 +278,11 @@ pub fn build_objects(
         roots.push(sink.end_object()?);
         check_cancel(opts)?;
     }
-    // Split streams keep their triangles' ids only when attributes need them.
-    let child_ids = if sink.has_attributes() { stream::Ids::Stored } else { stream::Ids::Absent };
-    let (mut attrs, materials, dropped) = sink.finish()?;
+    // Split streams keep their triangles' ids only when attributes or components need them.
+    let has_attributes = sink.has_attributes();
+    let (mut attrs, materials, dropped, components) = sink.finish()?;
+    let keep_ids = has_attributes || components.several();
+    let child_ids = if keep_ids { stream::Ids::Stored } else { stream::Ids::Absent };
     let triangles: u64 = roots.iter().map(|r| r.count).sum();
     let import_bytes: u64 = roots.iter().map(StreamFile::bytes).sum();
     if triangles == 0 {
@@ -351,17 +353,22 @@ pub fn build_objects(
     if !scene.settings.is_empty() {
         writer.set_settings(std::mem::take(&mut scene.settings));
     }
+    // One component is the whole scene: no table (a gen spec then builds the same file as
+    // its PLY).
+    if components.several() {
+        writer.set_components(components.names.clone(), components.tri_counts.clone());
+    }
     let lod_count = std::sync::atomic::AtomicU32::new(0);
     let lod_bytes = std::sync::atomic::AtomicU64::new(0);
     let writer = Mutex::new(writer);
     progress.stage("build parts", triangles);
     let single = parts.len() == 1;
-    let attrs = &attrs;
+    let (attrs, components) = (&attrs, &components);
     let built = pool.install(|| {
         use rayon::prelude::*;
         parts.par_iter().enumerate().with_max_len(1).try_for_each(|(i, p)| -> Result<(), BuildError> {
             check_cancel(opts)?;
-            let (blob, lods) = build_part(p, attrs, opts, single, &io)?;
+            let (blob, lods) = build_part(p, attrs, components, opts, single, &io)?;
             let n = blob.tri_count;
             let mut w = writer.lock().unwrap_or_else(|e| e.into_inner());
             w.append_part(i as u32, &blob)?;
@@ -485,6 +492,7 @@ pub fn release_spare() {
 fn build_part(
     s: &StreamFile,
     attrs: &attrs::AttrStreams,
+    components: &sink::ComponentIds,
     opts: &BuildOptions,
     parallel: bool,
     io: &split::IoCount,
@@ -511,12 +519,14 @@ fn build_part(
     blob.uvs = attrs.gather::<[[f32; 2]; 3]>(attrs::UV, &slot_ids)?;
     blob.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &slot_ids)?;
     blob.materials = attrs.gather::<u32>(attrs::MATERIAL, &slot_ids)?;
+    blob.components = component_runs(&tri_source, &slot_ids, components);
     let mut lods = Vec::with_capacity(levels.len());
     for level in levels {
         let (mut lb, src) = build_in_core(&level.tris, opts.tile_target, parallel, opts.quality);
         let slot_ids = per_slot(&src, |i| ids[level.source[i as usize] as usize]);
         lb.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &slot_ids)?;
         lb.materials = attrs.gather::<u32>(attrs::MATERIAL, &slot_ids)?;
+        lb.components = component_runs(&src, &slot_ids, components);
         lods.push((level.error, lb));
     }
     Ok((blob, lods))
@@ -535,6 +545,16 @@ fn per_slot(source: &[u32], id_of: impl Fn(u32) -> u64) -> Vec<u64> {
             last
         })
         .collect()
+}
+
+/// A part's component runs from its slots' ids (padding slots, [`tiles::PADDING`], join
+/// the run before them).
+fn component_runs(source: &[u32], slot_ids: &[u64], components: &sink::ComponentIds) -> Vec<(u32, u32)> {
+    if !components.several() {
+        return Vec::new();
+    }
+    let slots = source.iter().zip(slot_ids).map(|(&i, &id)| (i != tiles::PADDING).then(|| components.of(id)));
+    megaray_scene::components::runs_of(slots)
 }
 
 /// Builds one part in core from triangles in memory: its 8-wide BVH, cut into tiles of

@@ -26,6 +26,64 @@ pub struct BuildSink<'a> {
     seen: u64,
     /// The input being imported (for error messages).
     input: std::path::PathBuf,
+    /// Components named so far ([`TriangleSink::component`]).
+    components: ComponentIds,
+}
+
+/// The components of an import and which triangle ids belong to each: runs of ids in import
+/// order, `(first id, component)`.
+#[derive(Debug, Default)]
+pub struct ComponentIds {
+    pub names: Vec<String>,
+    pub tri_counts: Vec<u64>,
+    index: std::collections::HashMap<String, u32>,
+    runs: Vec<(u64, u32)>,
+    /// The current input's file name: the first segment of its components' names.
+    file: String,
+    /// The name given for the triangles that follow, until one comes.
+    pending: Option<String>,
+}
+
+impl ComponentIds {
+    /// Makes `name` current for the triangles that follow (a component gets its number
+    /// when its first triangle comes, so that names without triangles are not kept).
+    fn begin(&mut self, name: String) {
+        self.pending = Some(name);
+    }
+
+    /// Counts triangle `id` into the current component.
+    fn triangle(&mut self, id: u64) {
+        if let Some(name) = self.pending.take() {
+            let c = match self.index.get(&name) {
+                Some(&c) => c,
+                None => {
+                    let c = self.names.len() as u32;
+                    self.index.insert(name.clone(), c);
+                    self.names.push(name);
+                    self.tri_counts.push(0);
+                    c
+                }
+            };
+            if self.runs.last().is_none_or(|r| r.1 != c) {
+                self.runs.push((id, c));
+            }
+        }
+        if let Some(&(_, c)) = self.runs.last() {
+            self.tri_counts[c as usize] += 1;
+        }
+    }
+
+    /// The component of triangle id `id` (ids count from the first import).
+    pub fn of(&self, id: u64) -> u32 {
+        let i = self.runs.partition_point(|r| r.0 <= id);
+        self.runs[i.saturating_sub(1)].1
+    }
+
+    /// Whether triangles of different components were imported (split streams must then
+    /// keep their ids).
+    pub fn several(&self) -> bool {
+        self.names.len() > 1
+    }
 }
 
 impl<'a> BuildSink<'a> {
@@ -42,6 +100,7 @@ impl<'a> BuildSink<'a> {
             opts,
             seen: 0,
             input: std::path::PathBuf::from("(input)"),
+            components: ComponentIds::default(),
         })
     }
 
@@ -50,9 +109,13 @@ impl<'a> BuildSink<'a> {
         self.dropped
     }
 
-    /// Names the input whose triangles come next.
+    /// Names the input whose triangles come next (and the component they belong to, until
+    /// the input names others).
     pub fn set_input(&mut self, path: &Path) {
         self.input = path.to_path_buf();
+        let file = path.file_name().map_or_else(|| path.to_string_lossy(), |f| f.to_string_lossy()).into_owned();
+        self.components.file = file.clone();
+        self.components.begin(file);
     }
 
     /// The sink's own failure (disk full, cancelled), if it had one.
@@ -86,13 +149,13 @@ impl<'a> BuildSink<'a> {
 
     /// Closes the streams (the positions stream of an object not ended is dropped): the
     /// attribute streams, the materials, and the number of degenerate triangles dropped.
-    pub fn finish(self) -> Result<(AttrStreams, Vec<MaterialDesc>, u64), BuildError> {
+    pub fn finish(self) -> Result<(AttrStreams, Vec<MaterialDesc>, u64, ComponentIds), BuildError> {
         if let Some(e) = self.error {
             return Err(e);
         }
         let rest = self.stream.finish()?;
         let _ = std::fs::remove_file(&rest.path);
-        Ok((self.attrs, self.materials, self.dropped))
+        Ok((self.attrs, self.materials, self.dropped, self.components))
     }
 }
 
@@ -115,6 +178,7 @@ impl TriangleSink for BuildSink<'_> {
             return Ok(());
         }
         let id = self.id_base + self.stream.count();
+        self.components.triangle(id);
         let r = self.stream.push(&StreamTri { v: p, reserved: 0, id }).and_then(|_| self.attrs.push(attr));
         if let Err(e) = r {
             let msg = e.to_string();
@@ -136,5 +200,11 @@ impl TriangleSink for BuildSink<'_> {
             texture: m.texture.map(|t| t.to_string_lossy().into_owned()),
         });
         (self.materials.len() - 1) as u32
+    }
+
+    fn component(&mut self, name: &str) {
+        let c = &mut self.components;
+        let full = if name.is_empty() { c.file.clone() } else { format!("{}/{name}", c.file) };
+        c.begin(full);
     }
 }

@@ -18,6 +18,10 @@ pub struct InfoArgs {
     /// Also check every tile's checksum (reads the whole file).
     #[arg(long)]
     verify: bool,
+    /// List the model's components (the parts as its user knows them: input files, OBJ
+    /// objects and groups, glTF node paths), with their triangle counts.
+    #[arg(long)]
+    parts: bool,
     /// Also walk every part's tree: node and leaf counts, child-slot fill and the SAH cost
     /// as Embree's `verbose=2` statistics measure it (reads every node of the file).
     #[arg(long)]
@@ -61,6 +65,7 @@ pub fn info(a: InfoArgs) -> Result<()> {
     let tile_sizes: Vec<u32> = tiles.iter().map(|t| t.bytes).collect();
     let tmean = tile_sizes.iter().map(|&b| b as f64).sum::<f64>() / tile_sizes.len().max(1) as f64;
     let tree = a.tree.then(|| scene.tree_stats());
+    let comps = scene.components();
     if a.json {
         let tree = tree.map(|t| {
             serde_json::json!({
@@ -93,6 +98,10 @@ pub fn info(a: InfoArgs) -> Result<()> {
                 "verified": a.verify,
                 "tree": tree,
                 "instances": instances_json(&scene),
+                "components": {"count": comps.names.len(), "runs": comps.runs.len(),
+                               "section_bytes": h.components_bytes},
+                "component_list": a.parts.then(|| comps.names.iter().zip(&comps.tri_counts)
+                    .map(|(n, t)| serde_json::json!({"name": n, "triangles": t})).collect::<Vec<_>>()),
             })
         );
         return Ok(());
@@ -109,6 +118,17 @@ pub fn info(a: InfoArgs) -> Result<()> {
         format_size(tmean as u64)
     );
     println!("  materials        {}", h.material_count);
+    if comps.is_empty() {
+        println!("  components       none named (the scene was built from one input with no groups)");
+    } else {
+        println!(
+            "  components       {} ({} runs, {} = {:.1} bytes a component; --parts lists them)",
+            comps.names.len(),
+            comps.runs.len(),
+            format_size(h.components_bytes),
+            h.components_bytes as f64 / comps.names.len() as f64
+        );
+    }
     if let Some(i) = scene.instancing() {
         let shown = i.instanced_triangles();
         println!(
@@ -156,6 +176,12 @@ pub fn info(a: InfoArgs) -> Result<()> {
     }
     if a.verify {
         println!("  every tile's checksum verified");
+    }
+    if a.parts {
+        println!("components:");
+        for (name, tris) in comps.names.iter().zip(&comps.tri_counts) {
+            println!("  {tris:>12}  {name}");
+        }
     }
     Ok(())
 }

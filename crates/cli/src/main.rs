@@ -148,10 +148,13 @@ enum Command {
     #[command(verbatim_doc_comment)]
     Serve(serve::ServeArgs),
     /// What lies under a pixel, exactly: one ray through the full-detail index (loading only
-    /// the tiles along it when paged); part, triangle, position, normal, distance
+    /// the tiles along it when paged); the component's name (input file, OBJ group, glTF
+    /// node path), part, triangle, position, normal, distance, and the wall's thickness (or
+    /// the clearance) behind it; with --to, a second pixel and the distance between the two
     ///
     /// Examples:
     ///   megaray pick plant.mray --pixel 512,300 --cam-offset 0,0.3,0.6
+    ///   megaray pick car.mray --pixel 100,200 --to 400,220
     ///   megaray pick plant.mray --mem 2G --eye 10,5,3 --at 0,0,0 --res 640x480 --pixel 320,240 --json
     #[command(verbatim_doc_comment)]
     Pick(pick::PickArgs),

@@ -1,7 +1,9 @@
 //! `megaray pick`: what lies under a pixel, exactly. One ray through the full-detail index
 //! (no level of detail, whatever a viewer showed there), loading only the tiles along it when
-//! the scene is paged; the closest hit's part, triangle, world position (in double precision,
-//! from the triangle's corners and the hit's barycentrics), normal and distance.
+//! the scene is paged ([`megaray_view::pick`]); the closest hit's component name, part,
+//! triangle, world position (in double precision, from the triangle's corners and the hit's
+//! barycentrics), normal, distance and what lies behind; with `--to`, a second pick and the
+//! distance between the two.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -22,6 +24,9 @@ pub struct PickArgs {
     /// The pixel, `X,Y` from the top left (its centre unless fractions are given: `10.25,4.5`).
     #[arg(long, value_name = "X,Y", value_parser = parse_pixel)]
     pixel: (f32, f32),
+    /// A second pixel: pick there too and measure the distance between the two points.
+    #[arg(long, value_name = "X,Y", value_parser = parse_pixel)]
+    to: Option<(f32, f32)>,
     /// Image size the pixel is in.
     #[arg(long, value_name = "WxH", default_value = "1024x1024", value_parser = parse_res)]
     res: (u32, u32),
@@ -58,74 +63,82 @@ fn parse_pixel(s: &str) -> Result<(f32, f32), String> {
     }
 }
 
+/// One pick as `--json` gives it.
+fn pick_json(pk: &Option<megaray_view::Picked>, secs: f64, loaded: Option<u64>) -> serde_json::Value {
+    match pk {
+        None => json!({ "hit": false, "seconds": secs, "tiles_loaded": loaded }),
+        Some(pk) => json!({
+            "hit": true, "component": pk.name, "part": pk.part, "triangle": pk.triangle,
+            "position": pk.position, "normal": pk.normal, "distance": pk.distance, "t": pk.t,
+            "front": pk.front, "behind": pk.behind, "seconds": secs, "tiles_loaded": loaded,
+        }),
+    }
+}
+
 /// Runs `megaray pick`.
 pub fn pick(a: PickArgs, bars: &dyn Progress) -> Result<()> {
     let opened = crate::open::scene_for(Some(&a.scene), &a.open, bars)?;
     let (scene, pager) = a.paging.open(&opened.path)?;
     let b = scene.header().bounds;
     let (w, h) = a.res;
-    let (px, py) = a.pixel;
-    if !(px >= 0.0 && py >= 0.0 && px < w as f32 && py < h as f32) {
-        bail!("--pixel {px},{py} lies outside the {w}x{h} image");
-    }
     let at = a.at.unwrap_or(b.center());
     let eye = a.eye.unwrap_or_else(|| b.center() + a.cam_offset.unwrap_or(DEFAULT_OFFSET) * b.diagonal());
     if (at - eye).length() == 0.0 || (at - eye).normalize().cross(a.up.normalize_or_zero()).length() < 1e-6 {
         bail!("--eye, --at and --up do not make a camera (eye equals at, or up is parallel to the view)");
     }
     let cam = Camera::look_at(eye, at, a.up, a.fov, w, h);
-    // Integer pixels mean their centres.
-    let (sx, sy) = if px.fract() == 0.0 && py.fract() == 0.0 { (px + 0.5, py + 0.5) } else { (px, py) };
-    let ray = cam.ray(sx, sy);
     let tracer = Tracer::paged_or_new(&scene, pager.as_ref());
-    let t0 = Instant::now();
-    let hit = tracer.intersect(&ray);
-    let secs = t0.elapsed().as_secs_f64();
-    if let Some(e) = crate::paging::fault(&tracer) {
-        return Err(e.into());
-    }
-    let loaded = pager.as_ref().map(|p| p.stats().loaded);
-    let Some(hit) = hit else {
-        if a.json {
-            println!("{}", json!({ "hit": false, "seconds": secs, "tiles_loaded": loaded }));
-        } else {
-            println!("nothing under pixel {px},{py}");
+    let mut picks = Vec::new();
+    for (px, py) in std::iter::once(a.pixel).chain(a.to) {
+        if !(px >= 0.0 && py >= 0.0 && px < w as f32 && py < h as f32) {
+            bail!("pixel {px},{py} lies outside the {w}x{h} image");
         }
-        return Ok(());
-    };
-    // The point from the corners and barycentrics, in f64.
-    let (u, v) = (hit.u as f64, hit.v as f64);
-    let c = hit.tri.map(|p| p.map(|x| x as f64));
-    let pos: [f64; 3] = std::array::from_fn(|k| (1.0 - u - v) * c[0][k] + u * c[1][k] + v * c[2][k]);
-    let n = hit.geometric_normal().normalize_or_zero();
-    let n = if n.dot(ray.dir) > 0.0 { -n } else { n };
-    let dist = {
-        let o = ray.org;
-        ((pos[0] - o.x as f64).powi(2) + (pos[1] - o.y as f64).powi(2) + (pos[2] - o.z as f64).powi(2)).sqrt()
+        // Integer pixels mean their centres.
+        let (sx, sy) = if px.fract() == 0.0 && py.fract() == 0.0 { (px + 0.5, py + 0.5) } else { (px, py) };
+        let loaded0 = pager.as_ref().map_or(0, |p| p.stats().loaded);
+        let t0 = Instant::now();
+        let found = megaray_view::pick(&tracer, &cam.ray(sx, sy));
+        let secs = t0.elapsed().as_secs_f64();
+        if let Some(e) = crate::paging::fault(&tracer) {
+            return Err(e.into());
+        }
+        let loaded = pager.as_ref().map(|p| p.stats().loaded - loaded0);
+        picks.push(((px, py), found, secs, loaded));
+    }
+    let measured = match (picks.first(), picks.get(1)) {
+        (Some((_, Some(p), ..)), Some((_, Some(q), ..))) => Some(p.distance_to(q)),
+        _ => None,
     };
     if a.json {
+        let mut objs: Vec<serde_json::Value> =
+            picks.iter().map(|(_, pk, secs, loaded)| pick_json(pk, *secs, *loaded)).collect();
+        let out = if objs.len() == 1 { objs.remove(0) } else { json!({ "picks": objs, "measured": measured }) };
+        println!("{out}");
+        return Ok(());
+    }
+    for ((px, py), pk, secs, _) in &picks {
+        let Some(pk) = pk else {
+            println!("nothing under pixel {px},{py}");
+            continue;
+        };
+        let [x, y, z] = pk.position;
+        let [nx, ny, nz] = pk.normal;
+        println!("{}", pk.name.as_deref().unwrap_or("(the scene names no components)"));
         println!(
-            "{}",
-            json!({
-                "hit": true, "part": hit.part, "triangle": hit.prim, "position": pos,
-                "normal": [n.x, n.y, n.z], "distance": dist, "t": hit.t, "u": hit.u, "v": hit.v,
-                "seconds": secs, "tiles_loaded": loaded,
-            })
-        );
-    } else {
-        println!(
-            "part {} triangle {} at ({:.9}, {:.9}, {:.9}), normal ({:.4}, {:.4}, {:.4}), distance {:.9} ({:.3} ms)",
-            hit.part,
-            hit.prim,
-            pos[0],
-            pos[1],
-            pos[2],
-            n.x,
-            n.y,
-            n.z,
-            dist,
+            "  part {} triangle {} at ({x:.9}, {y:.9}, {z:.9}), normal ({nx:.4}, {ny:.4}, {nz:.4}), distance {:.9} ({:.3} ms)",
+            pk.part,
+            pk.triangle,
+            pk.distance,
             secs * 1e3
         );
+        match pk.behind {
+            Some(b) if pk.front => println!("  behind it: the next surface at {b:.9} (the wall's thickness)"),
+            Some(b) => println!("  behind it: the next surface at {b:.9} (the clearance)"),
+            None => println!("  behind it: nothing"),
+        }
+    }
+    if let Some(d) = measured {
+        println!("distance between the two points: {d:.9}");
     }
     Ok(())
 }

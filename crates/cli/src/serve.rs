@@ -243,7 +243,7 @@ impl Server<'_, '_> {
                     "mrays_s": s.mrays_s, "width": s.width, "height": s.height, "frames": s.frames,
                     "resident_bytes": s.resident, "budget": s.budget, "tiles_in_flight": s.in_flight,
                     "moving": s.moving, "eye": v.pose().eye.to_array(), "yaw": v.pose().yaw,
-                    "pitch": v.pose().pitch,
+                    "pitch": v.pose().pitch, "pick": v.pick_lines(),
                 });
                 ws.send(Message::text(stats.to_string()))?;
                 ws.send(Message::Binary(jpeg(v)?.into()))?;
@@ -336,7 +336,8 @@ enum Input {
 }
 
 /// Reads a page's message: `{"k":"down"|"up","key":CODE}`, `{"k":"drag","dx":X,"dy":Y}`,
-/// `{"k":"wheel","d":N}`, `{"k":"size","w":W,"h":H}`, `{"k":"ack"}`.
+/// `{"k":"wheel","d":N}`, `{"k":"size","w":W,"h":H}`, `{"k":"click","x":X,"y":Y,"measure":B}`,
+/// `{"k":"ack"}`.
 fn parse_input(text: &str) -> Result<Input, String> {
     let v: Value = serde_json::from_str(text).map_err(|e| format!("not JSON ({e})"))?;
     let num =
@@ -353,6 +354,11 @@ fn parse_input(text: &str) -> Result<Input, String> {
             num("dy")?.clamp(-4096.0, 4096.0) as f32,
         )),
         "wheel" => Input::Event(Event::Wheel(num("d")?.signum() as f32)),
+        "click" => Input::Event(Event::Click(
+            num("x")?.clamp(0.0, MAX_SIDE as f64) as f32,
+            num("y")?.clamp(0.0, MAX_SIDE as f64) as f32,
+            v.get("measure").and_then(Value::as_bool).unwrap_or(false),
+        )),
         "size" => {
             let side = |f: &str| num(f).map(|x| (x as u32).clamp(16, MAX_SIDE));
             Input::Size(side("w")?, side("h")?)
@@ -415,6 +421,11 @@ mod tests {
         assert_eq!(parse_input(r#"{"k":"up","key":"ArrowLeft"}"#), Ok(Input::Event(Event::Key(Key::Left, false))));
         assert_eq!(parse_input(r#"{"k":"drag","dx":3,"dy":-2.5}"#), Ok(Input::Event(Event::Drag(3.0, -2.5))));
         assert_eq!(parse_input(r#"{"k":"wheel","d":-3}"#), Ok(Input::Event(Event::Wheel(-1.0))));
+        assert_eq!(
+            parse_input(r#"{"k":"click","x":10.5,"y":1e9,"measure":true}"#),
+            Ok(Input::Event(Event::Click(10.5, MAX_SIDE as f32, true)))
+        );
+        assert!(parse_input(r#"{"k":"click","x":"a","y":2}"#).is_err());
         assert_eq!(parse_input(r#"{"k":"size","w":100000,"h":1}"#), Ok(Input::Size(MAX_SIDE, 16)));
         assert_eq!(parse_input(r#"{"k":"ack"}"#), Ok(Input::Ack));
         for bad in

@@ -27,6 +27,8 @@ Controls:
   Q          fly down
   drag       look around
   wheel      flying speed
+  click      pick: name, point, thickness (highlighted)
+  shift+clk  measure from the last pick
   R          reset to the default view
   F          frame the whole model
   P          save a screenshot (PNG)
@@ -210,7 +212,7 @@ fn window<'t>(
         })?;
     let mut view = with_source(ViewCore::new(tracer, pool, opts), source);
     let stem = name.trim_end_matches(".mray").to_string();
-    let mut mouse: Option<(f32, f32)> = None;
+    let mut mouse = Mouse::default();
     let mut buf: Vec<u32> = Vec::new();
     let mut last = Instant::now();
     let mut shown = 0u64;
@@ -253,7 +255,7 @@ fn window<'t>(
 /// The window's input since its last update, to the core: keys that went down and up (a tap
 /// between two updates too), a drag with the left button, the wheel. P saves a screenshot
 /// `<stem>-NNN.png` in the working folder.
-fn poll(win: &minifb::Window, view: &mut ViewCore, mouse: &mut Option<(f32, f32)>, stem: &str) {
+fn poll(win: &minifb::Window, view: &mut ViewCore, mouse: &mut Mouse, stem: &str) {
     for k in win.get_keys_pressed(minifb::KeyRepeat::No) {
         if let Some(key) = key_of(k) {
             view.handle(Event::Key(key, true));
@@ -273,18 +275,37 @@ fn poll(win: &minifb::Window, view: &mut ViewCore, mouse: &mut Option<(f32, f32)
     }
     let pos = win.get_mouse_pos(minifb::MouseMode::Pass);
     if win.get_mouse_down(minifb::MouseButton::Left) {
-        if let (Some((x0, y0)), Some((x, y))) = (*mouse, pos) {
+        if let (Some((x0, y0)), Some((x, y))) = (mouse.last, pos) {
             view.handle(Event::Drag(x - x0, y - y0));
+            mouse.travel += (x - x0).abs() + (y - y0).abs();
         }
-        *mouse = pos;
-    } else {
-        *mouse = None;
+        if mouse.last.is_none() {
+            (mouse.start, mouse.travel) = (pos, 0.0);
+        }
+        mouse.last = pos;
+    } else if mouse.last.take().is_some() {
+        // A press and release that hardly moved is a click: pick there.
+        if let (Some((x, y)), true) = (mouse.start, mouse.travel < 3.0) {
+            let shift = win.is_key_down(minifb::Key::LeftShift) || win.is_key_down(minifb::Key::RightShift);
+            view.handle(Event::Click(x, y, shift));
+            if let Some(l) = view.pick_lines().first() {
+                eprintln!("{l}");
+            }
+        }
     }
     if let Some((_, dy)) = win.get_scroll_wheel() {
         if dy != 0.0 {
             view.handle(Event::Wheel(dy.signum()));
         }
     }
+}
+
+/// The left button: where it went down, where it was last, how far it moved since.
+#[derive(Default)]
+struct Mouse {
+    start: Option<(f32, f32)>,
+    last: Option<(f32, f32)>,
+    travel: f32,
 }
 
 /// One frame's line of `frames.jsonl` and `--log`: when it was shown (`t`, seconds since
@@ -301,6 +322,15 @@ pub fn frame_line(view: &ViewCore, n: u64, client: Option<u64>) -> String {
     });
     if let Some(c) = client {
         v["client"] = c.into();
+    }
+    if let Some(pk) = view.picked() {
+        v["picked"] = json!({
+            "component": pk.name, "part": pk.part, "triangle": pk.triangle, "position": pk.position,
+            "normal": pk.normal, "distance": pk.distance, "behind": pk.behind, "front": pk.front,
+        });
+    }
+    if let Some(d) = view.measured() {
+        v["measured"] = d.into();
     }
     v.to_string() + "\n"
 }

@@ -94,8 +94,10 @@ pub(crate) fn import(
     let mut declared: Vec<Option<u32>> = vec![None; plan.materials.len()];
     let mut summary = ImportSummary { bytes: len, ..ImportSummary::default() };
     let mut skipped = 0u64;
-    for &(world, mi) in &plan.instances {
+    for (world, mi, node_path) in &plan.instances {
+        let (world, mi) = (*world, *mi);
         let mesh = &plan.meshes[mi];
+        sink.component(&format!("{node_path}: {}", mesh.name));
         for (pi, &(mode, material)) in mesh.prims.iter().enumerate() {
             let loc = || Some(format!("mesh \"{}\" primitive {pi}", mesh.name));
             if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
@@ -139,8 +141,9 @@ struct MeshInfo {
 
 /// What the scene walk produces.
 pub(crate) struct Plan {
-    /// World matrix and mesh index of every node with a mesh, in depth-first order.
-    instances: Vec<(Mat4, usize)>,
+    /// World matrix, mesh index and node path (names from the root, `/`-separated; an
+    /// unnamed node is `node N`) of every node with a mesh, in depth-first order.
+    instances: Vec<(Mat4, usize, String)>,
     meshes: Vec<MeshInfo>,
     /// Every material of the document, converted (declared to the sink on first use).
     materials: Vec<Material>,
@@ -166,24 +169,26 @@ pub(crate) fn plan(doc: &::gltf::Document, base: &Path) -> Result<Plan, (Option<
     }
     let mut visited = vec![false; n];
     let mut instances = Vec::new();
-    let mut stack: Vec<(::gltf::Node, Mat4)> = Vec::new();
+    let mut stack: Vec<(::gltf::Node, Mat4, String)> = Vec::new();
     for root in scene.nodes().collect::<Vec<_>>().into_iter().rev() {
         if parents[root.index()] > 0 {
             let msg = "a root node of the scene is also a child of another node";
             return Err((Some(format!("node {}", root.index())), msg.to_string()));
         }
-        stack.push((root, Mat4::IDENTITY));
+        stack.push((root, Mat4::IDENTITY, String::new()));
     }
-    while let Some((node, parent)) = stack.pop() {
+    while let Some((node, parent, above)) = stack.pop() {
         if std::mem::replace(&mut visited[node.index()], true) {
             continue;
         }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+        let name = node.name().map_or_else(|| format!("node {}", node.index()), str::to_string);
+        let path = if above.is_empty() { name } else { format!("{above}/{name}") };
         if let Some(mesh) = node.mesh() {
-            instances.push((world, mesh.index()));
+            instances.push((world, mesh.index(), path.clone()));
         }
         for c in node.children().collect::<Vec<_>>().into_iter().rev() {
-            stack.push((c, world));
+            stack.push((c, world, path.clone()));
         }
     }
     let meshes = doc

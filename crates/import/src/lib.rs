@@ -96,6 +96,10 @@ pub trait TriangleSink {
     /// Declares a material; the returned id goes into the [`TriAttr::material`] of the
     /// triangles that use it.
     fn material(&mut self, m: Material) -> u32;
+    /// The triangles from here on belong to the component `name` within the file (an OBJ
+    /// object or group, a glTF node path and mesh); the empty name is the file itself. Sinks
+    /// that do not name components ignore it.
+    fn component(&mut self, _name: &str) {}
 }
 
 /// How an import may use resources.

@@ -81,6 +81,8 @@ struct Obj<'a> {
     usemtl: Option<u32>,
     seen_usemtl: bool,
     group: Option<String>,
+    /// The last `o` name (components are `object/group`).
+    object: String,
     /// Material of the next face, `None` when it must be recomputed.
     material: Option<u32>,
     faces: u64,
@@ -117,6 +119,7 @@ pub(crate) fn import(
         usemtl: None,
         seen_usemtl: false,
         group: None,
+        object: String::new(),
         material: None,
         faces: 0,
         short_faces: 0,
@@ -218,6 +221,15 @@ impl Obj<'_> {
             b"f" => self.face(rest, no, sink)?,
             b"g" | b"o" => {
                 let name = rest_of_line(rest, 0);
+                // The component: `o` names an object, `g` a group within it.
+                if kw == b"o" {
+                    self.object = name.clone();
+                    sink.component(&name);
+                } else if self.object.is_empty() || name.is_empty() {
+                    sink.component(if name.is_empty() { &self.object } else { &name });
+                } else {
+                    sink.component(&format!("{}/{name}", self.object));
+                }
                 self.group = (!name.is_empty()).then_some(name);
                 self.material = None;
             }

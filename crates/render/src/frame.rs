@@ -64,6 +64,12 @@ impl std::ops::DerefMut for Renderer {
     }
 }
 
+/// A highlighted surface's colour: its brightness, in orange, over a little of its own.
+fn highlight(c: Vec3) -> Vec3 {
+    let lum = c.dot(Vec3::new(0.2126, 0.7152, 0.0722));
+    c * 0.3 + Vec3::new(1.0, 0.45, 0.05) * (0.7 * lum + 0.08)
+}
+
 impl Renderer {
     /// A renderer for a scene with bounds `bounds`, shading with `settings.shader`, with the
     /// constant sky `settings.sky` as its (implicit) environment.
@@ -144,6 +150,11 @@ impl Renderer {
         }
         ctx.enter(&hit);
         out.radiance = self.shader.shade(ray, &sh, &mut ctx)?;
+        if let Some(c) = self.settings.highlight {
+            if ctx.scene().components().of(hit.part, hit.prim) == Some(c) {
+                out.radiance = highlight(out.radiance);
+            }
+        }
         out.rays = ctx.rays();
         Ok(out)
     }

@@ -50,6 +50,9 @@ pub struct RenderSettings {
     /// detail that is (the tile is requested; later frames refine the pixel) instead of
     /// waiting ([`crate::FrameOptions::stand_in`]). Meant with a deadline, and for viewers.
     pub stand_in: bool,
+    /// A component ([`megaray_scene::Components`]) whose surfaces camera rays show tinted
+    /// (the viewer's picked part).
+    pub highlight: Option<u32>,
 }
 
 impl RenderSettings {
@@ -71,6 +74,7 @@ impl RenderSettings {
             aovs: false,
             frame_deadline: None,
             stand_in: false,
+            highlight: None,
         }
     }
 }

@@ -10,9 +10,9 @@ use megaray_base::Aabb;
 /// The first eight bytes of every scene file.
 pub const MAGIC: [u8; 8] = *b"MRAYSCN\x1a";
 /// The format version this code writes and reads.
-pub const VERSION: u32 = 6;
-/// The oldest version this code reads: version 5 is version 6 without instances (its
-/// instance fields were reserved zeros).
+pub const VERSION: u32 = 7;
+/// The oldest version this code reads: version 5 is version 6 without instances, and 6 is 7
+/// without components (their fields were reserved zeros).
 pub const MIN_VERSION: u32 = 5;
 /// Page size: tiles and sections start on multiples of it.
 pub const PAGE: u64 = 4096;
@@ -49,7 +49,7 @@ pub const ATTR_MATERIAL: u32 = 8;
 /// | 120..128 | `materials_bytes` |
 /// | 128..132 | `material_count` |
 /// | 132..136 | `lod_part_count`: the parts at the end of the directory that are levels of detail |
-/// | 136..144 | `meta_checksum`: XXH3-64 of top-level tree, part, tile and material tables and the instance section, in that order |
+/// | 136..144 | `meta_checksum`: XXH3-64 of top-level tree, part, tile and material tables, the instance section, the settings and the component section, in that order |
 /// | 144..152 | `instances_off`: offset of the instance section (`instances.rs`), or 0 |
 /// | 152..160 | `instances_bytes` |
 /// | 160..164 | `object_count` |
@@ -58,7 +58,11 @@ pub const ATTR_MATERIAL: u32 = 8;
 /// | 172..176 | reserved, zero |
 /// | 176..184 | `settings_off`: offset of the settings (UTF-8 JSON: camera, lights), or 0 |
 /// | 184..192 | `settings_bytes` |
-/// | 192..248 | reserved, zero |
+/// | 192..200 | `components_off`: offset of the component section (`components.rs`), or 0 |
+/// | 200..208 | `components_bytes` |
+/// | 208..212 | `component_count` |
+/// | 212..216 | `component_run_count` |
+/// | 216..248 | reserved, zero |
 /// | 248..256 | `header_checksum`: XXH3-64 of bytes 0..248 |
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -92,7 +96,11 @@ pub struct Header {
     pub reserved0: u32,
     pub settings_off: u64,
     pub settings_bytes: u64,
-    pub reserved: [u64; 7],
+    pub components_off: u64,
+    pub components_bytes: u64,
+    pub component_count: u32,
+    pub component_run_count: u32,
+    pub reserved: [u64; 4],
     pub header_checksum: u64,
 }
 const _: () = assert!(std::mem::size_of::<Header>() == 256);

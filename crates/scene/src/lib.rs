@@ -29,6 +29,7 @@
 //! owned scene reads with `pread`, so a truncated file makes a load fail with an error.
 
 mod backing;
+pub mod components;
 pub mod error;
 pub mod format;
 pub mod instances;
@@ -36,6 +37,7 @@ pub mod reader;
 pub mod stats;
 pub mod writer;
 
+pub use components::Components;
 pub use error::{SceneError, SceneErrorKind};
 pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
 pub use instances::{Group, Instance, Instancing, Object, Target};

@@ -73,6 +73,8 @@ pub struct Scene {
     instancing: Option<crate::Instancing>,
     /// The scene's settings (JSON), empty when it has none.
     settings: String,
+    /// Named components and the runs of slots that belong to them ([`Scene::components`]).
+    components: crate::Components,
 }
 
 /// The tiles by position in the file, for [`Scene::tile_of_unit`]: the file cut into
@@ -276,15 +278,18 @@ impl Scene {
             .ok_or_else(|| bad("instance section lies outside the file"))?;
         let settings = range(header.settings_off, header.settings_bytes, len)
             .ok_or_else(|| bad("settings lie outside the file"))?;
+        let comps = range(header.components_off, header.components_bytes, len)
+            .filter(|_| header.components_off.is_multiple_of(8))
+            .ok_or_else(|| bad("component section lies outside the file"))?;
         if let Backing::Owned(r) = &backing {
             // The tables stay loaded while the scene is open (the header page is).
-            for t in [&top, &parts, &tiles, &mats, &inst, &settings] {
+            for t in [&top, &parts, &tiles, &mats, &inst, &settings, &comps] {
                 r.load(t.start as u64, t.len() as u64).map_err(|e| SceneError::io(path, "read", &e))?;
             }
         }
         let map = backing.bytes();
         let mut meta = xxhash_rust::xxh3::Xxh3::new();
-        for r in [&top, &parts, &tiles, &mats, &inst, &settings] {
+        for r in [&top, &parts, &tiles, &mats, &inst, &settings, &comps] {
             meta.update(&map[r.clone()]);
         }
         if !sums_match(meta.digest(), header.meta_checksum) {
@@ -300,6 +305,11 @@ impl Scene {
             ),
         };
         let settings_text = String::from_utf8_lossy(&map[settings]).into_owned();
+        let components = match header.component_count {
+            0 => crate::Components::default(),
+            n => crate::Components::decode(&map[comps], n, header.component_run_count, header.part_count)
+                .map_err(|e| bad(&format!("component section: {e}")))?,
+        };
         let scene = Scene {
             path: path.to_path_buf(),
             tile_state: (0..header.tile_count).map(|_| AtomicU8::new(TILE_UNCHECKED)).collect(),
@@ -311,6 +321,7 @@ impl Scene {
             tile_index: OnceLock::new(),
             instancing,
             settings: settings_text,
+            components,
         };
         scene.check_tables()?;
         if owned {
@@ -662,6 +673,7 @@ impl Scene {
             (h.materials_off, h.materials_bytes),
             (h.instances_off, h.instances_bytes),
             (h.settings_off, h.settings_bytes),
+            (h.components_off, h.components_bytes),
         ]
     }
 
@@ -669,6 +681,12 @@ impl Scene {
     /// `up`, `fov`; `environment`, `sun`), or `None`.
     pub fn settings(&self) -> Option<&str> {
         (!self.settings.is_empty()).then_some(self.settings.as_str())
+    }
+
+    /// The scene's named components (empty for a scene built without names, or before
+    /// format version 7).
+    pub fn components(&self) -> &crate::Components {
+        &self.components
     }
 
     /// The scene's objects, groups and instances; `None` for a scene that is its parts.

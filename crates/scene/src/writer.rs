@@ -92,6 +92,9 @@ pub struct PartBlob {
     pub uvs: Option<Vec<[[f32; 2]; 3]>>,
     pub colors: Option<Vec<[[u8; 4]; 3]>>,
     pub materials: Option<Vec<u32>>,
+    /// The part's component runs, `(first_slot, component)` in slot order
+    /// ([`crate::components::runs_of`]); empty when the scene names no components.
+    pub components: Vec<(u32, u32)>,
 }
 
 impl PartBlob {
@@ -137,6 +140,8 @@ pub struct SceneWriter {
     instancing: Option<crate::Instancing>,
     /// The scene's own settings ([`SceneWriter::set_settings`]).
     settings: String,
+    /// Component names and triangle counts ([`SceneWriter::set_components`]).
+    components: crate::Components,
 }
 
 fn page_up(x: u64) -> u64 {
@@ -200,6 +205,7 @@ impl SceneWriter {
             attr_flags: 0,
             instancing: None,
             settings: String::new(),
+            components: crate::Components::default(),
         };
         w.write_at(bytemuck::cast_slice(&w.top_nodes.clone()), top_off)?;
         Ok(w)
@@ -245,6 +251,17 @@ impl SceneWriter {
         ] {
             assert!(n.is_none_or(|n| n as u64 == slot_count), "part {index}: {what} array is not one per slot");
         }
+        assert!(
+            part.components
+                .iter()
+                .all(|&(s, c)| u64::from(s) < slot_count.max(1) && (c as usize) < self.components.names.len()),
+            "part {index}: a component run outside the part or the table"
+        );
+        self.components.runs.extend(part.components.iter().map(|&(first_slot, component)| crate::components::Run {
+            part: index,
+            first_slot,
+            component,
+        }));
         let mut first_slot = 0u32;
         let start = self.cursor;
         let mut node_count = 0u64;
@@ -363,6 +380,14 @@ impl SceneWriter {
         self.settings = json;
     }
 
+    /// Names the scene's components (their triangle counts alongside); parts then give their
+    /// runs ([`PartBlob::components`]). Call before appending parts.
+    pub fn set_components(&mut self, names: Vec<String>, tri_counts: Vec<u64>) {
+        assert_eq!(names.len(), tri_counts.len());
+        self.components.names = names;
+        self.components.tri_counts = tri_counts;
+    }
+
     /// Tiles appended so far.
     pub fn tile_count(&self) -> u32 {
         self.tiles.len() as u32
@@ -408,6 +433,14 @@ impl SceneWriter {
                 t.part = index;
             }
         }
+        // Component runs of levels of detail, renumbered as their parts were.
+        let mut comps = std::mem::take(&mut self.components);
+        for r in &mut comps.runs {
+            if r.part >= self.part_count {
+                r.part = final_index[(r.part - self.part_count) as usize];
+            }
+        }
+        comps.runs.sort_unstable();
         // The top-level tree's parts, as links to their roots (traversal then never looks a
         // part up), written over the placeholder `create` wrote.
         for n in &mut self.top_nodes {
@@ -444,6 +477,12 @@ impl SceneWriter {
             self.write_at(&settings, settings_off)?;
             end += settings.len() as u64;
         }
+        let comp_bytes = if comps.is_empty() { Vec::new() } else { comps.encode() };
+        let components_off = if comp_bytes.is_empty() { 0 } else { end.next_multiple_of(8) };
+        if !comp_bytes.is_empty() {
+            self.write_at(&comp_bytes, components_off)?;
+            end = components_off + comp_bytes.len() as u64;
+        }
         let file_bytes = page_up(end);
         let parts_off = self.parts_off;
         self.write_at(bytemuck::cast_slice(&parts), parts_off)?;
@@ -455,6 +494,7 @@ impl SceneWriter {
         meta.extend_from_slice(&mat_bytes);
         meta.extend_from_slice(&inst_bytes);
         meta.extend_from_slice(&settings);
+        meta.extend_from_slice(&comp_bytes);
         let mut h = Header {
             magic: MAGIC,
             version: VERSION,
@@ -485,7 +525,11 @@ impl SceneWriter {
             reserved0: 0,
             settings_off,
             settings_bytes: settings.len() as u64,
-            reserved: [0; 7],
+            components_off,
+            components_bytes: comp_bytes.len() as u64,
+            component_count: comps.names.len() as u32,
+            component_run_count: comps.runs.len() as u32,
+            reserved: [0; 4],
             header_checksum: 0,
         };
         h.header_checksum = xxhash_rust::xxh3::xxh3_64(&bytemuck::bytes_of(&h)[..248]);

@@ -20,6 +20,7 @@ use megaray_trace::Tracer;
 use crate::camera::{FlyCamera, Pose};
 use crate::input::{help_lines, Event, Key};
 use crate::overlay::draw_lines;
+use crate::pick::{pick, Picked};
 
 /// How a view renders.
 #[derive(Clone)]
@@ -147,6 +148,9 @@ pub struct ViewCore<'t, 's> {
     screenshots: u32,
     source: Option<FrameSource<'t>>,
     error: Option<String>,
+    /// The last pick (a click), highlighted; and the distance measured to the one before.
+    picked: Option<Picked>,
+    measured: Option<f64>,
 }
 
 impl<'t, 's> ViewCore<'t, 's> {
@@ -184,6 +188,8 @@ impl<'t, 's> ViewCore<'t, 's> {
             screenshots: 0,
             source: None,
             error: None,
+            picked: None,
+            measured: None,
             opts: ViewOptions { width: w, height: h, ..opts },
         };
         v.rebuild_renderer();
@@ -211,6 +217,7 @@ impl<'t, 's> ViewCore<'t, 's> {
         s.shader = self.shader;
         s.light_samples = self.opts.light_samples;
         s.stand_in = self.opts.frame_budget.is_some();
+        s.highlight = self.picked.as_ref().and_then(|p| p.component);
         let r = Renderer::new(s, &self.bounds);
         self.renderer = match (&self.opts.sky, self.sky_on) {
             (Some(env), true) => r.with_environment(env.clone()),
@@ -246,7 +253,45 @@ impl<'t, 's> ViewCore<'t, 's> {
                     self.rebuild_renderer();
                 }
             }
+            Event::Click(x, y, measure) => self.click(x, y, measure),
         }
+    }
+
+    /// Picks under (x, y) of the view (exactly, through the full-detail index): the picked
+    /// component is highlighted; with `measure`, the distance from the last pick is kept.
+    fn click(&mut self, x: f32, y: f32, measure: bool) {
+        let (w, h) = (self.opts.width, self.opts.height);
+        let ray = self.cam.pose.camera(self.opts.fov, w, h).ray(x, y);
+        let found = pick(self.tracer, &ray);
+        self.measured = match (measure, &self.picked, &found) {
+            (true, Some(a), Some(b)) => Some(a.distance_to(b)),
+            _ => None,
+        };
+        let before = self.picked.as_ref().and_then(|p| p.component);
+        self.picked = found;
+        if self.picked.as_ref().and_then(|p| p.component) != before {
+            self.rebuild_renderer();
+        }
+        self.compose();
+    }
+
+    /// The last pick, if the last click hit something.
+    pub fn picked(&self) -> Option<&Picked> {
+        self.picked.as_ref()
+    }
+
+    /// The distance between the last two picks, after a measuring click.
+    pub fn measured(&self) -> Option<f64> {
+        self.measured
+    }
+
+    /// The lines a viewer shows of the picks: the last one, and the measured distance.
+    pub fn pick_lines(&self) -> Vec<String> {
+        let mut v: Vec<String> = self.picked.iter().map(Picked::line).collect();
+        if let Some(d) = self.measured {
+            v.push(format!("measured {d:.4} from the previous pick (scene units)"));
+        }
+        v
     }
 
     fn act(&mut self, k: Key) {
@@ -431,6 +476,7 @@ impl<'t, 's> ViewCore<'t, 's> {
         if self.info {
             lines.push(self.stats_line());
         }
+        lines.extend(self.pick_lines());
         if self.help {
             lines.extend(help_lines());
         }

@@ -112,6 +112,8 @@ pub fn help_lines() -> Vec<String> {
     let mut v: Vec<String> = Key::ALL.iter().map(|k| format!("{:<10} {}", k.names(), k.what())).collect();
     v.insert(6, format!("{:<10} {}", "drag", "look around"));
     v.insert(7, format!("{:<10} {}", "wheel", "flying speed"));
+    v.insert(8, format!("{:<10} {}", "click", "pick: name, point, thickness (highlighted)"));
+    v.insert(9, format!("{:<10} {}", "shift+clk", "measure from the last pick"));
     v
 }
 
@@ -126,6 +128,9 @@ pub enum Event {
     Wheel(f32),
     /// The view is now this many pixels.
     Resize(u32, u32),
+    /// A click at (x, y) in the view's pixels: pick what lies there; `true` (shift held)
+    /// also measures from the last pick.
+    Click(f32, f32, bool),
 }
 
 /// One step of a [`Script`].
@@ -148,6 +153,7 @@ pub enum Step {
 /// drag 40 -10       # the mouse dragged 40 pixels right, 10 up
 /// wheel 2           # two notches up
 /// resize 320 240
+/// click 160 120     # pick under pixel (160, 120); `click X Y measure`: shift-click
 /// key screenshot down
 /// ```
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -199,9 +205,13 @@ impl Script {
                     }
                     _ => return Err(err(format!("bad size `{line}`"))),
                 },
+                ["click", x, y, rest @ ..] if rest.is_empty() || rest == ["measure"] => match (num(x), num(y)) {
+                    (Some(x), Some(y)) => Step::Input(Event::Click(x, y, !rest.is_empty())),
+                    _ => return Err(err(format!("bad click `{line}`"))),
+                },
                 _ => {
                     return Err(err(format!(
-                        "cannot read `{line}` (frames N, key NAME down|up, drag DX DY, wheel N, resize W H)"
+                        "cannot read `{line}` (frames N, key NAME down|up, drag DX DY, wheel N, resize W H, click X Y [measure])"
                     )))
                 }
             };

@@ -12,6 +12,7 @@
 //! | `input.rs` | [`Key`] (by role), [`Event`], [`Script`] |
 //! | `core.rs` | [`ViewCore`], [`ViewOptions`], [`ViewStats`] |
 //! | `overlay.rs` | the statistics line and help drawn over the picture |
+//! | `pick.rs` | [`pick`]: exact picking and measuring through the full-detail index |
 //!
 //! ```no_run
 //! use megaray_scene::Scene;
@@ -30,7 +31,9 @@ mod camera;
 mod core;
 mod input;
 mod overlay;
+pub mod pick;
 
 pub use crate::camera::{FlyCamera, Pose};
 pub use crate::core::{FrameSource, ViewCore, ViewOptions, ViewStats};
 pub use crate::input::{help_lines, Event, Key, Script, ScriptError, Step};
+pub use crate::pick::{pick, Picked};
