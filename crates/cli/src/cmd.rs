@@ -357,6 +357,8 @@ pub struct RenderArgs {
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
     #[command(flatten)]
+    show: crate::show::ShowArgs,
+    #[command(flatten)]
     paging: crate::paging::PagingArgs,
     #[command(flatten)]
     open: crate::open::OpenArgs,
@@ -427,6 +429,7 @@ impl RenderArgs {
             json: false,
             threads: None,
             paging: Default::default(),
+            show: Default::default(),
             open: crate::open::OpenArgs { no_cache: false, build_mem: 2 << 30 },
             deadline: None,
             lod_error: 1.0,
@@ -578,6 +581,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     settings.frame_deadline = a.deadline.map(Duration::from_millis);
     // Frames against a deadline answer rays from resident stand-ins rather than wait.
     settings.stand_in = a.deadline.is_some();
+    settings.visibility = a.show.visibility(scene.components())?;
     let pool = pool(a.threads)?;
     let t = Instant::now();
     let mut renderer = Renderer::new(settings, &b);

@@ -14,6 +14,7 @@ mod paging;
 mod pick;
 mod progress;
 mod serve;
+mod show;
 mod view;
 
 use clap::{Parser, Subcommand};

@@ -63,7 +63,8 @@ pub fn serve(a: ServeArgs, bars: &Bars) -> Result<()> {
     let tracer = Tracer::paged_or_new(&scene, pager.as_ref()).with_lod_error(a.viewer.lod_error);
     let pool = crate::cmd::pool(a.viewer.threads)?;
     a.viewer.options(640, 480)?; // the options' errors before listening
-                                 // Under mpirun rank 0 serves the pages and the other ranks render their frames' tiles.
+    a.viewer.show.visibility(scene.components())?;
+    // Under mpirun rank 0 serves the pages and the other ranks render their frames' tiles.
     let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.viewer.mpi_timeout)?;
     if let Some(c) = cluster.as_mut().filter(|c| !c.is_root()) {
         return crate::cluster::serve_view(c, &a.viewer.options(640, 480)?, &tracer, &pool);
@@ -261,6 +262,7 @@ impl Server<'_, '_> {
     fn view(&self, w: u32, h: u32) -> Result<ViewCore<'_, '_>> {
         let mut opts = self.viewer.options(w, h)?;
         crate::view::scene_home(&mut opts, self.tracer.scene());
+        opts.visibility = self.viewer.show.visibility(self.tracer.scene().components())?;
         let source = self.frames.clone().map(crate::cluster::request_source);
         Ok(crate::view::with_source(ViewCore::new(self.tracer, self.pool, opts), source))
     }
@@ -384,6 +386,11 @@ fn key_of_code(code: &str) -> Option<Key> {
         "KeyK" => Key::ToggleSky,
         "KeyH" => Key::Help,
         "KeyI" => Key::Info,
+        "KeyX" => Key::XRay,
+        "KeyV" => Key::Hide,
+        "KeyB" => Key::Isolate,
+        "KeyN" => Key::Section,
+        "KeyU" => Key::ShowAll,
         "Escape" => Key::Quit,
         _ => return None,
     })

@@ -36,6 +36,11 @@ Controls:
   K          sky light on / off
   H          this help
   I          statistics line on / off
+  X          X-ray the picked part on / off
+  V          hide the picked part
+  B          show only the picked part / all
+  N          section through the picked wall (eye's side cut)
+  U          show everything (no hide, X-ray, section)
   Esc        quit";
 
 /// What the viewers (`view`, `serve`) share: the scene, how it is lit and shaded, paging.
@@ -82,6 +87,8 @@ pub struct ViewerArgs {
     pub paging: crate::paging::PagingArgs,
     #[command(flatten)]
     pub open: crate::open::OpenArgs,
+    #[command(flatten)]
+    pub show: crate::show::ShowArgs,
 }
 
 /// The demo's sky, what K lights the scene with when no --env or --sky is given.
@@ -128,8 +135,9 @@ pub struct ViewArgs {
     pub res: (u32, u32),
     /// No window: replay this script of input (see below) and write every frame to --out.
     /// Script lines: `frames N`, `key NAME down|up` (NAME: forward, back, left, right, up,
-    /// down, reset, frame, screenshot, nextshader, togglesky, help, info, quit), `drag DX DY`,
-    /// `wheel N`, `resize W H`; `#` starts a comment.
+    /// down, reset, frame, screenshot, nextshader, togglesky, help, info, xray, hide, isolate,
+    /// section, showall, quit), `drag DX DY`, `wheel N`, `resize W H`, `click X Y [measure]`;
+    /// `#` starts a comment.
     #[arg(long, value_name = "FILE", requires = "out")]
     pub script: Option<PathBuf>,
     /// The folder for --script's frames (frame-00001.png, ...) and frames.jsonl (the pose
@@ -159,6 +167,11 @@ fn key_of(k: minifb::Key) -> Option<Key> {
         K::K => Key::ToggleSky,
         K::H => Key::Help,
         K::I => Key::Info,
+        K::X => Key::XRay,
+        K::V => Key::Hide,
+        K::B => Key::Isolate,
+        K::N => Key::Section,
+        K::U => Key::ShowAll,
         K::Escape => Key::Quit,
         _ => return None,
     })
@@ -171,6 +184,7 @@ pub fn view(a: ViewArgs, bars: &Bars) -> Result<()> {
     let pool = crate::cmd::pool(a.viewer.threads)?;
     let mut opts = a.viewer.options(a.res.0, a.res.1)?;
     scene_home(&mut opts, &scene);
+    opts.visibility = a.viewer.show.visibility(scene.components())?;
     let name = opened.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     // Under mpirun rank 0 shows the view and the other ranks render its frames' tiles.
     let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.viewer.mpi_timeout)?;
@@ -331,6 +345,13 @@ pub fn frame_line(view: &ViewCore, n: u64, client: Option<u64>) -> String {
     }
     if let Some(d) = view.measured() {
         v["measured"] = d.into();
+    }
+    let vis = view.visibility();
+    if !vis.is_empty() {
+        let count = |f: &[bool]| f.iter().filter(|&&x| x).count();
+        v["hidden"] = count(&vis.hidden).into();
+        v["xrayed"] = count(&vis.xray).into();
+        v["sections"] = vis.sections.len().into();
     }
     v.to_string() + "\n"
 }

@@ -118,3 +118,115 @@ fn a_click_in_the_viewer_highlights_and_names_the_part() {
     // A click on nothing (the sky in the corner, or a surface: whatever is there) replaces it.
     assert_eq!(orange(4) > 0, f[3].get("picked").is_some());
 }
+
+/// Renders `scene` straight at the box (normal shader: no shadows, exact per hit) with
+/// `extra` options; the image's RGB bytes.
+fn shot(scene: &Path, dir: &Path, name: &str, extra: &[&str]) -> image::RgbImage {
+    let out = dir.join(format!("{name}.png"));
+    let args = ["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q", "--res", "64x48"];
+    let cam = ["--eye", "0.3,0.2,5", "--at", "0,0,0", "--fov", "50", "--shader", "normal"];
+    let (code, _, err) = run(&[&args[..], &cam[..], extra].concat());
+    assert_eq!(code, 0, "{err}");
+    image::open(&out).unwrap().to_rgb8()
+}
+
+/// Pixels in the colour of section caps (red, where the normal shader draws none).
+fn caps(img: &image::RgbImage) -> usize {
+    img.pixels().filter(|p| p[0] as u32 > p[1] as u32 + 60 && p[0] as u32 > p[2] as u32 + 60).count()
+}
+
+#[test]
+fn hide_isolate_xray_and_sections() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let scene = scene(d);
+    // The plate alone and the box alone, built apart, for what hiding must equal.
+    let lines: Vec<&str> = std::fs::read_to_string(d.join("box.obj")).unwrap().leak().lines().collect();
+    let (wall, back) = (lines[..15].join("\n"), lines[15..].join("\n").replace("f 9 10 11 12", "f 1 2 3 4"));
+    let mut alone = Vec::new();
+    for (name, text) in [("wall", wall), ("back", back)] {
+        std::fs::write(d.join(format!("{name}.obj")), text).unwrap();
+        let out = d.join(format!("{name}.mray"));
+        let (code, _, err) =
+            run(&["build", d.join(format!("{name}.obj")).to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
+        assert_eq!(code, 0, "{err}");
+        alone.push(shot(&out, d, &format!("{name}-alone"), &[]));
+    }
+    let plain = shot(&scene, d, "plain", &[]);
+    assert_eq!(caps(&plain), 0);
+    // Hide and isolate, by glob: the same picture as the other part alone.
+    assert!(shot(&scene, d, "hide", &["--hide", "*wall"]) == alone[1], "hiding the wall shows the plate alone");
+    assert!(shot(&scene, d, "iso", &["--isolate", "box.obj/w*"]) == alone[0], "isolating the wall shows it alone");
+    // X-ray: the wall's pixels change (a faint layer over the plate), the rest is the plate's.
+    let xray = shot(&scene, d, "xray", &["--xray", "*wall"]);
+    let over = xray.pixels().zip(alone[1].pixels()).filter(|(x, q)| x != q).count();
+    let same = xray.pixels().len() - over;
+    assert!(over > 100 && same > 100, "{over} pixels under the X-ray layer, {same} as the plate alone");
+
+    // A plane through the box (z = 0.1, the eye's side cut): the box's front is gone and the
+    // cut shows a solid cap where the box was.
+    let cut = shot(&scene, d, "cut", &["--section", "0,0,0.1,0,0,1"]);
+    let n_cap = caps(&cut);
+    assert!(n_cap > 200, "{n_cap} cap pixels");
+    // Every cap pixel lies where the box is (the box alone covers it).
+    let sky = alone[0].get_pixel(0, 0);
+    for (x, y, p) in cut.enumerate_pixels() {
+        if caps(&image::RgbImage::from_pixel(1, 1, *p)) == 1 {
+            assert_ne!(alone[0].get_pixel(x, y), sky, "a cap pixel at {x},{y} off the box");
+        }
+    }
+    // Two planes: the intersection of their kept sides (x > 0 cut too): about half the cap.
+    let half = caps(&shot(&scene, d, "cut2", &["--section", "0,0,0.1,0,0,1", "--section", "0,0,0,1,0,0"]));
+    assert!(half * 10 > n_cap * 4 && half * 10 < n_cap * 6, "{half} of {n_cap}");
+    // A box keeps its inside: the box's slab z in [-0.5, 0.1] (the plate and the front face cut).
+    let boxed = shot(&scene, d, "boxed", &["--section-box", "-5,-5,-0.5,5,5,0.1"]);
+    assert!(
+        caps(&boxed) > 200 && boxed.pixels().filter(|p| *p == sky).count() > cut.pixels().filter(|p| *p == sky).count()
+    );
+    // A plane limited to the plate (cutting z < -0.5) takes the plate away, the wall stays whole.
+    let only = shot(&scene, d, "only", &["--section", "0,0,-0.5,0,0,-1@*back"]);
+    assert!(only == alone[0], "the limited plane cut only the plate");
+    // Bad patterns and planes: one line each.
+    for (opt, val, says) in [("--hide", "*door", "matches none"), ("--section", "1,2", "6 numbers")] {
+        let out = d.join("bad.png");
+        let (code, _, err) = run(&["render", scene.to_str().unwrap(), "-o", out.to_str().unwrap(), opt, val]);
+        assert!(code == 1 && err.contains(says) && err.lines().count() == 1, "{err}");
+    }
+}
+
+#[test]
+fn viewer_keys_hide_show_and_cut_the_picked_part() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene(dir.path());
+    let script = dir.path().join("keys.txt");
+    let press = |k: &str| format!("key {k} down\nkey {k} up\nframes 1\n");
+    let text = format!(
+        "frames 1\nclick 32 24\nframes 1\n{}{}{}{}{}",
+        press("hide"),
+        press("showall"),
+        press("xray"),
+        press("showall"),
+        press("section")
+    );
+    std::fs::write(&script, text).unwrap();
+    let out = dir.path().join("frames");
+    let args = ["view", scene.to_str().unwrap(), "--res", "64x48", "--script"];
+    let (code, _, err) = run(&[&args[..], &[script.to_str().unwrap(), "--out", out.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{err}");
+    let log = std::fs::read_to_string(out.join("frames.jsonl")).unwrap();
+    let f: Vec<Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(f.len(), 7);
+    assert_eq!(f[1]["picked"]["component"], "box.obj/wall", "{}", f[1]);
+    let png = |n: usize| image::open(out.join(format!("frame-{n:05}.png"))).unwrap().to_rgb8();
+    let orange = |n: usize| png(n).pixels().filter(|p| p[0] as i32 > p[2] as i32 + 60 && p[1] > p[2]).count();
+    assert!(orange(2) > 20);
+    // Hidden: the wall is gone (no highlight left), then shown again exactly as before.
+    assert_eq!((orange(3), &f[2]["hidden"]), (0, &1.into()), "{}", f[2]);
+    assert!(png(4) == png(2), "show all brings back the same picture");
+    // X-rayed: not the picked orange any more, but not the plate alone either.
+    assert_eq!(f[4]["xrayed"], 1);
+    assert!(png(5) != png(2) && png(5) != png(3));
+    // A section through the picked point, the eye's side cut: the wall's cut face is capped.
+    assert_eq!(f[6]["sections"], 1);
+    assert!(caps(&png(7)) > 20, "{} cap pixels", caps(&png(7)));
+}

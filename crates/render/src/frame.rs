@@ -23,6 +23,7 @@ use crate::rows;
 use crate::sampling::{light_subset, pixel_offset, Sampler};
 use crate::settings::RenderSettings;
 use crate::shader::{ShadeCtx, Shader, SurfaceHit};
+use crate::visibility::{camera_view, through, Filtered, CAP_COLOR};
 use crate::world::World;
 
 /// What one sample (or the average of a pixel's samples) yields.
@@ -108,10 +109,52 @@ impl Renderer {
         sample_index: u32,
         caster: &mut dyn RayCaster,
     ) -> Result<SampleOut, Suspended> {
+        let mut f = Filtered::new(caster, self.settings.visibility.as_deref());
+        self.sample_in(px, py, sample_index, &mut f)
+    }
+
+    /// [`Renderer::sample`] through a caster that applies the settings' visibility.
+    pub(crate) fn sample_in<C: RayCaster + ?Sized>(
+        &self,
+        px: u32,
+        py: u32,
+        sample_index: u32,
+        f: &mut Filtered<'_, C>,
+    ) -> Result<SampleOut, Suspended> {
         let (ox, oy) = pixel_offset(sample_index);
         let ray = self.settings.camera.ray(px as f32 + ox, py as f32 + oy);
-        let hit = caster.intersect_cone(&ray, &self.camera_cone())?;
-        self.shade_camera_hit(px, py, sample_index, &ray, hit, caster)
+        self.camera_sample(px, py, sample_index, &ray, f)
+    }
+
+    /// Traces and shades camera ray `ray` of sample `sample_index` of pixel (`px`, `py`):
+    /// X-ray layers over what lies behind them, a section cap, or the shaded hit.
+    #[inline]
+    pub(crate) fn camera_sample<C: RayCaster + ?Sized>(
+        &self,
+        px: u32,
+        py: u32,
+        sample_index: u32,
+        ray: &Ray,
+        f: &mut Filtered<'_, C>,
+    ) -> Result<SampleOut, Suspended> {
+        let view = camera_view(f, ray, &self.camera_cone())?;
+        let mut out = match view.cap {
+            Some((t, n)) => {
+                let n = if n.dot(ray.dir) > 0.0 { -n } else { n };
+                let c = Vec3::from(CAP_COLOR);
+                let lit = c * (0.35 + 0.65 * n.dot(self.settings.light.normalize_or_zero()).abs());
+                let mut o = SampleOut { radiance: lit, depth: f32::INFINITY, rays: 1, ..SampleOut::default() };
+                if self.settings.aovs {
+                    (o.depth, o.normal, o.albedo) = (t, n, c);
+                }
+                o
+            }
+            None => self.shade_camera_hit(px, py, sample_index, ray, view.hit, f)?,
+        };
+        if view.layers > 0 {
+            out.radiance = out.radiance * through(view.layers) + view.ghost;
+        }
+        Ok(out)
     }
 
     /// The footprint of camera rays.
@@ -162,10 +205,22 @@ impl Renderer {
     /// The `spp` samples of pixel (`px`, `py`) in frame `frame` (sample indices
     /// `frame * spp .. (frame + 1) * spp`), averaged. Depth is the nearest of the samples'.
     pub fn pixel(&self, px: u32, py: u32, frame: u32, caster: &mut dyn RayCaster) -> Result<SampleOut, Suspended> {
+        let mut f = Filtered::new(caster, self.settings.visibility.as_deref());
+        self.pixel_in(px, py, frame, &mut f)
+    }
+
+    /// [`Renderer::pixel`] through a caster that applies the settings' visibility.
+    pub(crate) fn pixel_in<C: RayCaster + ?Sized>(
+        &self,
+        px: u32,
+        py: u32,
+        frame: u32,
+        f: &mut Filtered<'_, C>,
+    ) -> Result<SampleOut, Suspended> {
         let spp = self.settings.spp.max(1);
         let mut acc = SampleOut { depth: f32::INFINITY, ..SampleOut::default() };
         for k in 0..spp {
-            let s = self.sample(px, py, frame.wrapping_mul(spp).wrapping_add(k), caster)?;
+            let s = self.sample_in(px, py, frame.wrapping_mul(spp).wrapping_add(k), f)?;
             acc.radiance += s.radiance;
             acc.normal += s.normal;
             acc.albedo += s.albedo;

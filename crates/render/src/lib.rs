@@ -23,6 +23,9 @@
 //!   ([`Renderer::sample`]), and the frame loop over 32x32 tiles on rayon's threads.
 //! - [`Accumulator`], [`render_progressive`] (`accum.rs`): progressive accumulation of frames
 //!   with an error estimate.
+//! - [`Visibility`], [`Filtered`] (`visibility.rs`): hidden and X-rayed components,
+//!   section planes with caps, applied to every ray by a caster that steps past what is
+//!   not shown.
 //! - [`Image`], [`ToneMap`], [`save_exr`] (`image_out.rs`): tone-mapped PNG, float OpenEXR
 //!   with depth, normal and albedo layers.
 //!
@@ -73,6 +76,7 @@ mod settings;
 mod shader;
 pub mod shaders;
 mod sky;
+mod visibility;
 mod world;
 
 pub use accum::{render_progressive, render_progressive_with, Accumulator, Stop};
@@ -90,6 +94,7 @@ pub use sampling::{light_subset, pixel_offset, Sampler};
 pub use settings::{default_light, Builtin, RenderSettings};
 pub use shader::{ShadeCtx, Shader, SurfaceHit};
 pub use sky::{write_env, SkySpec};
+pub use visibility::{Filtered, Section, Visibility, CAP_COLOR};
 pub use world::World;
 
 use megaray_trace::Tracer;

@@ -13,6 +13,7 @@ use megaray_trace::{RayCaster, Suspended};
 
 use crate::frame::{Renderer, TILE};
 use crate::sampling::pixel_offset;
+use crate::visibility::Filtered;
 
 /// The most pixels of a job.
 pub(crate) const GROUP: usize = 16;
@@ -91,6 +92,7 @@ impl Renderer {
     /// The pixels of `g` in frame `frame` (as [`Renderer::pixel`] gives them), traced through
     /// `caster`; entries past `g.len` are left black.
     pub(crate) fn group<C: RayCaster>(&self, g: Group, frame: u32, caster: &mut C) -> Result<GroupOut, Suspended> {
+        let caster = &mut Filtered::new(caster, self.settings.visibility.as_deref());
         let mut out = GroupOut { rgb: [[0.0; 3]; GROUP], rays: 0, approx: 0 };
         let len = g.len as usize;
         // One sample a pixel: sample index `frame`, the same offset for every pixel.
@@ -100,7 +102,6 @@ impl Renderer {
             let sx: [f32; 16] = std::array::from_fn(|k| (g.x0 + g.step * k.min(len - 1) as u32) as f32 + ox);
             self.settings.camera.rays16(&sx, &[g.y as f32 + oy; 16])
         });
-        let cone = self.camera_cone();
         for k in 0..len {
             // A pixel finished in an earlier run of this job (before it was suspended) is
             // recalled, not redone: the job needs one pixel's tiles at a time.
@@ -113,12 +114,8 @@ impl Renderer {
             let mark = caster.mark();
             let x = g.x0 + g.step * k as u32;
             let s = match &rays {
-                Some(rays) => {
-                    let ray = rays.ray(k);
-                    let hit = caster.intersect_cone(&ray, &cone)?;
-                    self.shade_camera_hit(x, g.y, frame, &ray, hit, caster)?
-                }
-                None => self.pixel(x, g.y, frame, caster)?,
+                Some(rays) => self.camera_sample(x, g.y, frame, &rays.ray(k), caster)?,
+                None => self.pixel_in(x, g.y, frame, caster)?,
             };
             let rgb = s.radiance.to_array();
             let approx = caster.take_approx();

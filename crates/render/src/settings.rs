@@ -53,6 +53,9 @@ pub struct RenderSettings {
     /// A component ([`megaray_scene::Components`]) whose surfaces camera rays show tinted
     /// (the viewer's picked part).
     pub highlight: Option<u32>,
+    /// Hidden and X-rayed components and section planes ([`crate::Visibility`]); `None`
+    /// shows everything.
+    pub visibility: Option<std::sync::Arc<crate::Visibility>>,
 }
 
 impl RenderSettings {
@@ -75,6 +78,7 @@ impl RenderSettings {
             frame_deadline: None,
             stand_in: false,
             highlight: None,
+            visibility: None,
         }
     }
 }

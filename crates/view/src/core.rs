@@ -10,10 +10,10 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use megaray_base::Aabb;
+use megaray_base::{Aabb, Vec3};
 use megaray_render::{
     render_frame_with, Accumulator, Builtin, Environment, Frame, FrameOptions, Image, ImageError, LodGovernor,
-    RenderSettings, Renderer, ToneMap,
+    RenderSettings, Renderer, Section, ToneMap, Visibility,
 };
 use megaray_trace::Tracer;
 
@@ -53,6 +53,9 @@ pub struct ViewOptions {
     /// Where the view starts (and R returns): the scene's own camera, if its source gave
     /// one; `None`: the default framing of `megaray render`.
     pub home: Option<Pose>,
+    /// What is shown at the start (`--hide`, `--isolate`, `--xray`, `--section`); keys
+    /// change it from there.
+    pub visibility: Option<Arc<Visibility>>,
 }
 
 /// Whether the still frame that brings the accumulation to `frames` frames is shown denoised:
@@ -77,6 +80,7 @@ impl ViewOptions {
             max_frames: 1024,
             denoise: true,
             home: None,
+            visibility: None,
         }
     }
 }
@@ -151,6 +155,8 @@ pub struct ViewCore<'t, 's> {
     /// The last pick (a click), highlighted; and the distance measured to the one before.
     picked: Option<Picked>,
     measured: Option<f64>,
+    /// Hidden and X-rayed components and sections, as options and keys left them.
+    vis: Visibility,
 }
 
 impl<'t, 's> ViewCore<'t, 's> {
@@ -190,6 +196,7 @@ impl<'t, 's> ViewCore<'t, 's> {
             error: None,
             picked: None,
             measured: None,
+            vis: opts.visibility.as_deref().cloned().unwrap_or_default(),
             opts: ViewOptions { width: w, height: h, ..opts },
         };
         v.rebuild_renderer();
@@ -218,6 +225,7 @@ impl<'t, 's> ViewCore<'t, 's> {
         s.light_samples = self.opts.light_samples;
         s.stand_in = self.opts.frame_budget.is_some();
         s.highlight = self.picked.as_ref().and_then(|p| p.component);
+        s.visibility = (!self.vis.is_empty()).then(|| Arc::new(self.vis.clone()));
         let r = Renderer::new(s, &self.bounds);
         self.renderer = match (&self.opts.sky, self.sky_on) {
             (Some(env), true) => r.with_environment(env.clone()),
@@ -275,6 +283,49 @@ impl<'t, 's> ViewCore<'t, 's> {
         self.compose();
     }
 
+    /// Acts on the visibility for key `k` (X, V, B on the picked component, N a section
+    /// through the pick, U all shown); whether anything changed.
+    fn inspect(&mut self, k: Key) -> bool {
+        let n = self.tracer.scene().components().names.len();
+        let v = &mut self.vis;
+        if k == Key::ShowAll {
+            let changed = !v.is_empty();
+            *v = Visibility::default();
+            return changed;
+        }
+        let Some(p) = &self.picked else { return false };
+        if k == Key::Section {
+            // Facing the eye (the eye's side cut away), through the middle of the wall the
+            // pick entered (the picked point itself when it left one).
+            let n = Vec3::from(p.normal);
+            let depth = if p.front { p.behind.unwrap_or(0.0) as f32 * 0.5 } else { 0.0 };
+            v.sections.push(Section::new(Vec3::from(p.position.map(|x| x as f32)) - n * depth, n));
+            return true;
+        }
+        let Some(c) = p.component.map(|c| c as usize).filter(|&c| c < n) else { return false };
+        for flags in [&mut v.hidden, &mut v.xray] {
+            flags.resize(n, false);
+        }
+        match k {
+            Key::XRay => v.xray[c] = !v.xray[c],
+            Key::Hide => v.hidden[c] = true,
+            Key::Isolate => {
+                // Isolated already (everything else hidden): show all again.
+                let isolated = (0..n).all(|i| v.hidden[i] == (i != c));
+                for (i, h) in v.hidden.iter_mut().enumerate() {
+                    *h = !isolated && i != c;
+                }
+            }
+            _ => return false,
+        }
+        true
+    }
+
+    /// What is shown now (hidden, X-rayed, sections).
+    pub fn visibility(&self) -> &Visibility {
+        &self.vis
+    }
+
     /// The last pick, if the last click hit something.
     pub fn picked(&self) -> Option<&Picked> {
         self.picked.as_ref()
@@ -312,6 +363,10 @@ impl<'t, 's> ViewCore<'t, 's> {
             Key::ToggleSky if self.opts.sky.is_some() => {
                 self.sky_on = !self.sky_on;
                 self.rebuild_renderer();
+            }
+            // (`inspect` changes what is shown; the renderer follows when it did.)
+            Key::XRay | Key::Hide | Key::Isolate | Key::Section | Key::ShowAll if self.inspect(k) => {
+                self.rebuild_renderer()
             }
             Key::Help => self.help = !self.help,
             Key::Info => self.info = !self.info,

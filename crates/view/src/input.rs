@@ -33,6 +33,16 @@ pub enum Key {
     Help,
     /// I: the statistics line on or off.
     Info,
+    /// X: the picked component X-rayed (see-through) or not.
+    XRay,
+    /// V: hide the picked component.
+    Hide,
+    /// B: show only the picked component, or everything again.
+    Isolate,
+    /// N: a section plane through the middle of the picked wall, cutting away the eye's side.
+    Section,
+    /// U: show everything (no hidden, X-rayed or isolated components, no sections).
+    ShowAll,
     /// Escape.
     Quit,
 }
@@ -54,12 +64,17 @@ impl Key {
             Key::ToggleSky => "K",
             Key::Help => "H",
             Key::Info => "I",
+            Key::XRay => "X",
+            Key::Hide => "V",
+            Key::Isolate => "B",
+            Key::Section => "N",
+            Key::ShowAll => "U",
             Key::Quit => "Esc",
         }
     }
 
     /// Every key, in the help text's order.
-    pub const ALL: [Key; 14] = [
+    pub const ALL: [Key; 19] = [
         Key::Forward,
         Key::Back,
         Key::Left,
@@ -73,6 +88,11 @@ impl Key {
         Key::ToggleSky,
         Key::Help,
         Key::Info,
+        Key::XRay,
+        Key::Hide,
+        Key::Isolate,
+        Key::Section,
+        Key::ShowAll,
         Key::Quit,
     ];
 
@@ -92,6 +112,11 @@ impl Key {
             Key::ToggleSky => "sky light on / off",
             Key::Help => "this help",
             Key::Info => "statistics line on / off",
+            Key::XRay => "X-ray the picked part on / off",
+            Key::Hide => "hide the picked part",
+            Key::Isolate => "show only the picked part / all",
+            Key::Section => "section through the picked wall (eye's side cut)",
+            Key::ShowAll => "show everything (no hide, X-ray, section)",
             Key::Quit => "quit",
         }
     }
