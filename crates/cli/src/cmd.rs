@@ -356,6 +356,11 @@ pub struct RenderArgs {
     /// Worker threads (default: all cores).
     #[arg(long, value_name = "N")]
     threads: Option<usize>,
+    /// Render a saved view (the `.view.json` the viewer writes beside each screenshot): its
+    /// camera, shader, sky, hidden, X-rayed and highlighted parts and sections, as the viewer
+    /// showed them (the viewer's light and sky; --res, --frames and the rest still apply).
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["eye", "at", "cam_offset"])]
+    view: Option<PathBuf>,
     #[command(flatten)]
     show: crate::show::ShowArgs,
     #[command(flatten)]
@@ -430,6 +435,7 @@ impl RenderArgs {
             threads: None,
             paging: Default::default(),
             show: Default::default(),
+            view: None,
             open: crate::open::OpenArgs { no_cache: false, build_mem: 2 << 30 },
             deadline: None,
             lod_error: 1.0,
@@ -539,6 +545,21 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     let (scene, pager) = a.paging.open(&opened.path)?;
     // The scene's own environment map and sun (a pbrt scene's), where none was given.
     let own_lights = crate::open::scene_lights(&scene);
+    let viewpoint = match &a.view {
+        Some(p) if a.show.any() => bail!("{}: give --view or --hide/--isolate/--xray/--section, not both", p.display()),
+        Some(p) => Some(crate::show::read_viewpoint(p, scene.components())?),
+        None => None,
+    };
+    // A saved view is lit as the viewer lit it: its sky (the viewer's default unless --env or
+    // --sky names one) or none, and the default light.
+    let map = match &viewpoint {
+        Some(vp) if !vp.sky => None,
+        Some(_) if map.is_none() => {
+            Some(crate::view::DEFAULT_SKY.parse::<SkySpec>().map_err(anyhow::Error::msg)?.map())
+        }
+        _ => map,
+    };
+    let own_lights = if viewpoint.is_some() { (None, None) } else { own_lights };
     let map = match (map, &own_lights.0) {
         (None, Some((path, scale))) if a.sky.is_none() => {
             let mut m = EnvMap::load(path)?;
@@ -565,7 +586,10 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         }
     }
     let own = if a.eye.is_none() && a.at.is_none() { crate::open::scene_camera(&scene, w, h) } else { None };
-    let cam = own.unwrap_or_else(|| Camera::look_at(eye, at, a.up, a.fov, w, h));
+    let cam = match &viewpoint {
+        Some(vp) => vp.pose.camera(vp.fov, w, h),
+        None => own.unwrap_or_else(|| Camera::look_at(eye, at, a.up, a.fov, w, h)),
+    };
     let mut settings = RenderSettings::new(cam);
     settings.light = a.light.or(own_lights.1).unwrap_or(megaray_render::default_light());
     settings.spp = a.spp;
@@ -582,6 +606,11 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     // Frames against a deadline answer rays from resident stand-ins rather than wait.
     settings.stand_in = a.deadline.is_some();
     settings.visibility = a.show.visibility(scene.components())?;
+    if let Some(vp) = &viewpoint {
+        settings.shader = vp.shader;
+        settings.visibility = Some(std::sync::Arc::new(vp.visibility())).filter(|v| !v.is_empty());
+        settings.highlight = vp.highlight;
+    }
     let pool = pool(a.threads)?;
     let t = Instant::now();
     let mut renderer = Renderer::new(settings, &b);

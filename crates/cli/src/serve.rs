@@ -17,7 +17,7 @@ use clap::Args;
 use image::ImageEncoder;
 use megaray_render::ToneMap;
 use megaray_trace::Tracer;
-use megaray_view::{Event, Key, ViewCore};
+use megaray_view::{Event, Key, ViewCore, Viewpoint};
 use serde_json::{json, Value};
 use tungstenite::protocol::WebSocketConfig;
 use tungstenite::{Message, WebSocket};
@@ -63,7 +63,7 @@ pub fn serve(a: ServeArgs, bars: &Bars) -> Result<()> {
     let tracer = Tracer::paged_or_new(&scene, pager.as_ref()).with_lod_error(a.viewer.lod_error);
     let pool = crate::cmd::pool(a.viewer.threads)?;
     a.viewer.options(640, 480)?; // the options' errors before listening
-    a.viewer.show.visibility(scene.components())?;
+    crate::view::scene_options(&mut a.viewer.options(640, 480)?, &a.viewer, &scene)?;
     // Under mpirun rank 0 serves the pages and the other ranks render their frames' tiles.
     let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.viewer.mpi_timeout)?;
     if let Some(c) = cluster.as_mut().filter(|c| !c.is_root()) {
@@ -90,6 +90,7 @@ pub fn serve(a: ServeArgs, bars: &Bars) -> Result<()> {
         max_clients: a.max_clients,
         log: &log,
         next_client: AtomicUsize::new(1),
+        views: Default::default(),
         frames: cluster.is_some().then_some(requests_tx),
     };
     std::thread::scope(|s| {
@@ -129,6 +130,9 @@ struct Server<'a, 's> {
     /// `--log`: the frames sent, of every page.
     log: &'a std::sync::Mutex<crate::view::FrameLog>,
     next_client: AtomicUsize,
+    /// Each page's current view (its [`megaray_view::Viewpoint`] as JSON), for the pages that
+    /// follow it.
+    views: std::sync::Mutex<std::collections::HashMap<u64, String>>,
     /// Under mpirun: where the pages ask for their frames (rank 0's main thread).
     frames: Option<std::sync::mpsc::Sender<crate::cluster::FrameRequest>>,
 }
@@ -175,6 +179,11 @@ impl Server<'_, '_> {
         let mut last = Instant::now();
         let client = self.next_client.fetch_add(1, Ordering::Relaxed) as u64;
         let mut sent = 0u64;
+        // A view asked for before the page's size made the core; the page this one follows,
+        // and the last view taken from it. The page's own view is shared while it is open.
+        let mut pending: Option<String> = None;
+        let (mut follow, mut followed) = (None::<u64>, String::new());
+        let _shared = Shared(&self.views, client);
         loop {
             // Every message waiting, then a frame.
             let wait_now = view.is_none() || (!busy && !fresh) || unacked >= MAX_UNACKED;
@@ -213,6 +222,10 @@ impl Server<'_, '_> {
                         Some(v) => v.handle(Event::Resize(w, h)),
                         None => view = Some(self.view(w, h)?),
                     },
+                    Input::View(text) => pending = Some(text),
+                    Input::Follow(leader) => {
+                        (follow, followed) = (Some(leader), String::new());
+                    }
                     Input::Event(ev) => {
                         let Some(v) = &mut view else { continue };
                         v.handle(ev);
@@ -228,6 +241,22 @@ impl Server<'_, '_> {
                 }
             }
             let Some(v) = &mut view else { continue };
+            if let Some(text) = pending.take() {
+                match Viewpoint::from_json(&text, self.tracer.scene().components()) {
+                    Ok(vp) => v.set_viewpoint(&vp),
+                    Err(e) => return close(&mut ws, format!("closed: bad view: {e}")),
+                }
+            }
+            // Following another page: its view, whenever it changes.
+            if let Some(leader) = follow {
+                let now = self.views.lock().ok().and_then(|m| m.get(&leader).cloned());
+                if let Some(text) = now.filter(|t| *t != followed) {
+                    if let Ok(vp) = Viewpoint::from_json(&text, self.tracer.scene().components()) {
+                        v.set_viewpoint(&vp);
+                    }
+                    followed = text;
+                }
+            }
             let dt = last.elapsed().as_secs_f32().min(0.25);
             last = Instant::now();
             busy = v.step(dt);
@@ -237,6 +266,12 @@ impl Server<'_, '_> {
                 std::process::exit(1);
             }
             fresh |= busy;
+            let current = v.viewpoint().to_json(self.tracer.scene().components());
+            if let Ok(mut views) = self.views.lock() {
+                if views.get(&client) != Some(&current) {
+                    views.insert(client, current.clone());
+                }
+            }
             if fresh && unacked < MAX_UNACKED {
                 let s = v.stats();
                 let stats = json!({
@@ -244,7 +279,8 @@ impl Server<'_, '_> {
                     "mrays_s": s.mrays_s, "width": s.width, "height": s.height, "frames": s.frames,
                     "resident_bytes": s.resident, "budget": s.budget, "tiles_in_flight": s.in_flight,
                     "moving": s.moving, "eye": v.pose().eye.to_array(), "yaw": v.pose().yaw,
-                    "pitch": v.pose().pitch, "pick": v.pick_lines(),
+                    "pitch": v.pose().pitch, "pick": v.pick_lines(), "client": client,
+                    "view": serde_json::from_str::<Value>(&current).unwrap_or(Value::Null),
                 });
                 ws.send(Message::text(stats.to_string()))?;
                 ws.send(Message::Binary(jpeg(v)?.into()))?;
@@ -261,8 +297,7 @@ impl Server<'_, '_> {
     /// A new viewer's core, at the page's size.
     fn view(&self, w: u32, h: u32) -> Result<ViewCore<'_, '_>> {
         let mut opts = self.viewer.options(w, h)?;
-        crate::view::scene_home(&mut opts, self.tracer.scene());
-        opts.visibility = self.viewer.show.visibility(self.tracer.scene().components())?;
+        crate::view::scene_options(&mut opts, self.viewer, self.tracer.scene())?;
         let source = self.frames.clone().map(crate::cluster::request_source);
         Ok(crate::view::with_source(ViewCore::new(self.tracer, self.pool, opts), source))
     }
@@ -329,16 +364,32 @@ fn close(ws: &mut WebSocket<Replayed>, why: String) -> Result<()> {
     bail!(why)
 }
 
+/// Shares a page's view with the pages that follow it while the page is open.
+struct Shared<'a>(&'a std::sync::Mutex<std::collections::HashMap<u64, String>>, u64);
+
+impl Drop for Shared<'_> {
+    fn drop(&mut self) {
+        if let Ok(mut m) = self.0.lock() {
+            m.remove(&self.1);
+        }
+    }
+}
+
 /// A message from the page.
 #[derive(Debug, PartialEq)]
 enum Input {
     Event(Event),
     Size(u32, u32),
     Ack,
+    /// Go to this saved view (JSON, from the page's address).
+    View(String),
+    /// Follow page N's view.
+    Follow(u64),
 }
 
 /// Reads a page's message: `{"k":"down"|"up","key":CODE}`, `{"k":"drag","dx":X,"dy":Y}`,
 /// `{"k":"wheel","d":N}`, `{"k":"size","w":W,"h":H}`, `{"k":"click","x":X,"y":Y,"measure":B}`,
+/// `{"k":"view","view":{...}}` (a saved view, [`Viewpoint`]), `{"k":"follow","client":N}`,
 /// `{"k":"ack"}`.
 fn parse_input(text: &str) -> Result<Input, String> {
     let v: Value = serde_json::from_str(text).map_err(|e| format!("not JSON ({e})"))?;
@@ -366,6 +417,10 @@ fn parse_input(text: &str) -> Result<Input, String> {
             Input::Size(side("w")?, side("h")?)
         }
         "ack" => Input::Ack,
+        "view" => Input::View(v.get("view").filter(|x| x.is_object()).ok_or("no \"view\" object")?.to_string()),
+        "follow" => {
+            Input::Follow(v.get("client").and_then(Value::as_u64).filter(|&c| c > 0).ok_or("no \"client\" number")?)
+        }
         other => return Err(format!("unknown kind {other:?}")),
     })
 }
@@ -433,6 +488,11 @@ mod tests {
             Ok(Input::Event(Event::Click(10.5, MAX_SIDE as f32, true)))
         );
         assert!(parse_input(r#"{"k":"click","x":"a","y":2}"#).is_err());
+        assert_eq!(parse_input(r#"{"k":"view","view":{"fov":60}}"#), Ok(Input::View(r#"{"fov":60}"#.into())));
+        assert_eq!(parse_input(r#"{"k":"follow","client":3}"#), Ok(Input::Follow(3)));
+        for bad in [r#"{"k":"view","view":3}"#, r#"{"k":"follow","client":0}"#, r#"{"k":"follow"}"#] {
+            assert!(parse_input(bad).is_err(), "{bad}");
+        }
         assert_eq!(parse_input(r#"{"k":"size","w":100000,"h":1}"#), Ok(Input::Size(MAX_SIDE, 16)));
         assert_eq!(parse_input(r#"{"k":"ack"}"#), Ok(Input::Ack));
         for bad in

@@ -32,6 +32,26 @@ pub struct ShowArgs {
     pub section_box: Option<String>,
 }
 
+/// Reads a saved view (`.view.json`, as the viewer writes beside each screenshot) against
+/// the scene's components.
+pub fn read_viewpoint(path: &std::path::Path, comps: &Components) -> Result<megaray_view::Viewpoint> {
+    use std::io::Read;
+    let mut text = String::new();
+    let max = megaray_view::viewpoint::MAX_BYTES as u64;
+    std::fs::File::open(path)
+        .and_then(|f| f.take(max + 1).read_to_string(&mut text))
+        .map_err(|e| anyhow::anyhow!("{}: cannot read the view: {e}", path.display()))?;
+    megaray_view::Viewpoint::from_json(text.trim(), comps).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))
+}
+
+impl ShowArgs {
+    /// Whether any option asks for something hidden, X-rayed or cut.
+    pub fn any(&self) -> bool {
+        !(self.hide.is_empty() && self.isolate.is_empty() && self.xray.is_empty() && self.section.is_empty())
+            || self.section_box.is_some()
+    }
+}
+
 /// Whether `name` matches `glob` (`*`: any run of characters, `?`: one).
 pub fn glob_match(glob: &str, name: &str) -> bool {
     let (g, n): (Vec<char>, Vec<char>) = (glob.chars().collect(), name.chars().collect());

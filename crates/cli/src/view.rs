@@ -89,10 +89,13 @@ pub struct ViewerArgs {
     pub open: crate::open::OpenArgs,
     #[command(flatten)]
     pub show: crate::show::ShowArgs,
+    /// Start from a saved view (the `.view.json` written beside each screenshot).
+    #[arg(long, value_name = "FILE")]
+    pub view: Option<PathBuf>,
 }
 
 /// The demo's sky, what K lights the scene with when no --env or --sky is given.
-const DEFAULT_SKY: &str = "sky:sun_elev=35,sun_azim=120,turbidity=3";
+pub(crate) const DEFAULT_SKY: &str = "sky:sun_elev=35,sun_azim=120,turbidity=3";
 
 impl ViewerArgs {
     /// The view options for a `w` x `h` view: shader, sky, frame budget.
@@ -183,8 +186,7 @@ pub fn view(a: ViewArgs, bars: &Bars) -> Result<()> {
     let tracer = Tracer::paged_or_new(&scene, pager.as_ref()).with_lod_error(a.viewer.lod_error);
     let pool = crate::cmd::pool(a.viewer.threads)?;
     let mut opts = a.viewer.options(a.res.0, a.res.1)?;
-    scene_home(&mut opts, &scene);
-    opts.visibility = a.viewer.show.visibility(scene.components())?;
+    scene_options(&mut opts, &a.viewer, &scene)?;
     let name = opened.path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     // Under mpirun rank 0 shows the view and the other ranks render its frames' tiles.
     let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.viewer.mpi_timeout)?;
@@ -439,9 +441,23 @@ pub(crate) fn with_source<'t, 's>(view: ViewCore<'t, 's>, source: Option<FrameSo
     }
 }
 
+/// What of `opts` comes from the scene: its own camera, what `--hide` and the like show of
+/// it, the `--view` to start from.
+pub(crate) fn scene_options(opts: &mut ViewOptions, a: &ViewerArgs, scene: &megaray_scene::Scene) -> Result<()> {
+    scene_home(opts, scene);
+    opts.visibility = a.show.visibility(scene.components())?;
+    if let Some(p) = &a.view {
+        if a.show.any() {
+            bail!("{}: give --view or --hide/--isolate/--xray/--section, not both", p.display());
+        }
+        opts.start = Some(crate::show::read_viewpoint(p, scene.components())?);
+    }
+    Ok(())
+}
+
 /// Starts `opts`'s view at `scene`'s own camera (a pbrt or glTF scene's), with its field of
 /// view, where the scene has one.
-pub(crate) fn scene_home(opts: &mut ViewOptions, scene: &megaray_scene::Scene) {
+fn scene_home(opts: &mut ViewOptions, scene: &megaray_scene::Scene) {
     if let Some(c) = crate::open::scene_camera(scene, opts.width.max(1), opts.height.max(1)) {
         opts.home = Some(megaray_view::Pose::looking_at(c.eye, c.eye + c.fwd));
         opts.fov = (2.0 * c.tan_half.atan()).to_degrees();

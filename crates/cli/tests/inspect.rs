@@ -230,3 +230,56 @@ fn viewer_keys_hide_show_and_cut_the_picked_part() {
     assert_eq!(f[6]["sections"], 1);
     assert!(caps(&png(7)) > 20, "{} cap pixels", caps(&png(7)));
 }
+
+#[test]
+fn a_saved_view_renders_as_the_viewer_showed_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene(dir.path());
+    let script = dir.path().join("save.txt");
+    // Look a little aside, pick the wall, X-ray it, cut the plate, let 3 frames gather, save.
+    std::fs::write(
+        &script,
+        "drag 12 -6\nframes 1\nclick 30 26\nkey xray down\nkey xray up\nframes 3\nkey screenshot down\nframes 1\n",
+    )
+    .unwrap();
+    let out = dir.path().join("frames");
+    let s = scene.to_str().unwrap();
+    let args = ["view", s, "--res", "64x48", "--section", "0,0,-0.5,0,0,-1@*back", "--script"];
+    let (code, _, err) = run(&[&args[..], &[script.to_str().unwrap(), "--out", out.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{err}");
+    let saved = out.join("screenshot-1.view.json");
+    let text = std::fs::read_to_string(&saved).unwrap();
+    let v = json(&text);
+    assert_eq!((&v["xray"][0], &v["highlight"]), (&"box.obj/wall".into(), &"box.obj/wall".into()), "{v}");
+    assert_eq!(v["sections"][0]["only"][0], "box.obj/back");
+    // `render --view` gives the screenshot, byte for byte.
+    let png = dir.path().join("again.png");
+    let (code, _, err) = run(&[
+        "render",
+        s,
+        "--view",
+        saved.to_str().unwrap(),
+        "--res",
+        "64x48",
+        "--frames",
+        "3",
+        "-q",
+        "-o",
+        png.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (a, b) = (image::open(out.join("screenshot-1.png")).unwrap(), image::open(&png).unwrap());
+    assert!(a == b, "render --view differs from the viewer's screenshot");
+    // The viewer starts from it too: its first frame's pose is the saved one.
+    std::fs::write(&script, "frames 1\n").unwrap();
+    let out2 = dir.path().join("frames2");
+    let args = ["view", s, "--res", "64x48", "--view", saved.to_str().unwrap(), "--script"];
+    let (code, _, err) = run(&[&args[..], &[script.to_str().unwrap(), "--out", out2.to_str().unwrap()]].concat());
+    assert_eq!(code, 0, "{err}");
+    let f = json(&std::fs::read_to_string(out2.join("frames.jsonl")).unwrap());
+    assert_eq!((&f["eye"], &f["yaw"], &f["xrayed"]), (&v["eye"], &v["yaw"], &1.into()), "{f}");
+    // A view naming a component the scene lacks: one line.
+    std::fs::write(&saved, text.replace("box.obj/wall", "box.obj/roof")).unwrap();
+    let (code, _, err) = run(&["render", s, "--view", saved.to_str().unwrap(), "-q", "-o", png.to_str().unwrap()]);
+    assert!(code == 1 && err.contains("roof") && err.contains("view.json") && err.lines().count() == 1, "{err}");
+}

@@ -189,7 +189,7 @@ fn the_window_opens_draws_reacts_saves_and_quits() {
         .unwrap();
     let mut view = Proc(child);
     let mut id = String::new();
-    wait_until("the window", 30, || {
+    wait_until("the window", 90, || {
         id = xdotool(&d, &["search", "--name", "megaray - plant.mray"]);
         !id.is_empty()
     });
@@ -386,5 +386,50 @@ fn the_page_in_a_browser_shows_frames_and_flies() {
     b.key(&t2, "KeyD", false);
     wait_until("frames after the garbage", 20, || b.eval(&t2, PAGE_STATE)["frames"].as_u64() > Some(before + 1));
     assert_ne!(b.eval(&t2, PAGE_STATE)["eye"], e2, "the server still flies the second tab");
+    assert!(http_get(&addr, "/").starts_with("HTTP/1.1 200"));
+}
+
+#[test]
+fn a_link_opens_the_same_view_and_a_tab_can_follow_another() {
+    if !have(&["chromium"]) {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene(dir.path());
+    let (_srv, addr) = serve(&scene);
+    let mut b = Browser::launch();
+    let t1 = b.tab(&format!("http://{addr}/"));
+    wait_until("frames in the first tab", 60, || b.eval(&t1, PAGE_STATE)["frames"].as_u64() > Some(1));
+    let e0 = b.eval(&t1, PAGE_STATE)["eye"].clone();
+    b.key(&t1, "KeyW", true);
+    std::thread::sleep(Duration::from_millis(300));
+    b.key(&t1, "KeyW", false);
+    wait_until("the first tab's camera to move", 20, || b.eval(&t1, PAGE_STATE)["eye"] != e0);
+    // Once it is still, its address holds its view; that link opens the same view.
+    wait_until("the view in the address", 20, || {
+        let href = b.eval(&t1, "location.href");
+        href.as_str().is_some_and(|h| h.contains("#view=")) && b.eval(&t1, "window.megaray.stats.moving") == false
+    });
+    std::thread::sleep(Duration::from_millis(200));
+    let (href, e1) = (b.eval(&t1, "location.href"), b.eval(&t1, PAGE_STATE)["eye"].clone());
+    let t2 = b.tab(href.as_str().unwrap());
+    wait_until("the linked tab at the same eye", 30, || b.eval(&t2, PAGE_STATE)["eye"] == e1);
+    // A third tab follows the first: the first flies, the third goes along.
+    let id = b.eval(&t1, "window.megaray.stats.client").as_u64().unwrap();
+    let t3 = b.tab(&format!("http://{addr}/?follow={id}"));
+    wait_until("the follower at the leader's eye", 30, || b.eval(&t3, PAGE_STATE)["eye"] == e1);
+    b.key(&t1, "KeyD", true);
+    std::thread::sleep(Duration::from_millis(300));
+    b.key(&t1, "KeyD", false);
+    wait_until("the leader to move", 20, || b.eval(&t1, PAGE_STATE)["eye"] != e1);
+    wait_until("the follower to follow", 30, || {
+        let (a, c) = (b.eval(&t1, PAGE_STATE)["eye"].clone(), b.eval(&t3, PAGE_STATE)["eye"].clone());
+        a == c && a != e1
+    });
+    assert_eq!(b.eval(&t2, PAGE_STATE)["eye"], e1, "the linked tab does not follow");
+    // A view in the address that names nothing of the scene closes that page's socket only.
+    let bad = format!("http://{addr}/#view=%7B%22eye%22%3A1%7D");
+    let t4 = b.tab(&bad);
+    wait_until("the bad view's socket to close", 30, || b.eval(&t4, PAGE_STATE)["closed"] == true);
     assert!(http_get(&addr, "/").starts_with("HTTP/1.1 200"));
 }

@@ -21,6 +21,7 @@ use crate::camera::{FlyCamera, Pose};
 use crate::input::{help_lines, Event, Key};
 use crate::overlay::draw_lines;
 use crate::pick::{pick, Picked};
+use crate::viewpoint::Viewpoint;
 
 /// How a view renders.
 #[derive(Clone)]
@@ -56,6 +57,8 @@ pub struct ViewOptions {
     /// What is shown at the start (`--hide`, `--isolate`, `--xray`, `--section`); keys
     /// change it from there.
     pub visibility: Option<Arc<Visibility>>,
+    /// A saved view to start from (`--view`), over `home` and `visibility`.
+    pub start: Option<Viewpoint>,
 }
 
 /// Whether the still frame that brings the accumulation to `frames` frames is shown denoised:
@@ -81,6 +84,7 @@ impl ViewOptions {
             denoise: true,
             home: None,
             visibility: None,
+            start: None,
         }
     }
 }
@@ -155,6 +159,8 @@ pub struct ViewCore<'t, 's> {
     /// The last pick (a click), highlighted; and the distance measured to the one before.
     picked: Option<Picked>,
     measured: Option<f64>,
+    /// The component shown highlighted (the last pick's, or a viewpoint's).
+    highlight: Option<u32>,
     /// Hidden and X-rayed components and sections, as options and keys left them.
     vis: Visibility,
 }
@@ -196,10 +202,14 @@ impl<'t, 's> ViewCore<'t, 's> {
             error: None,
             picked: None,
             measured: None,
+            highlight: None,
             vis: opts.visibility.as_deref().cloned().unwrap_or_default(),
             opts: ViewOptions { width: w, height: h, ..opts },
         };
         v.rebuild_renderer();
+        if let Some(vp) = v.opts.start.clone() {
+            v.set_viewpoint(&vp);
+        }
         v
     }
 
@@ -224,7 +234,7 @@ impl<'t, 's> ViewCore<'t, 's> {
         s.shader = self.shader;
         s.light_samples = self.opts.light_samples;
         s.stand_in = self.opts.frame_budget.is_some();
-        s.highlight = self.picked.as_ref().and_then(|p| p.component);
+        s.highlight = self.highlight;
         s.visibility = (!self.vis.is_empty()).then(|| Arc::new(self.vis.clone()));
         let r = Renderer::new(s, &self.bounds);
         self.renderer = match (&self.opts.sky, self.sky_on) {
@@ -275,9 +285,10 @@ impl<'t, 's> ViewCore<'t, 's> {
             (true, Some(a), Some(b)) => Some(a.distance_to(b)),
             _ => None,
         };
-        let before = self.picked.as_ref().and_then(|p| p.component);
         self.picked = found;
-        if self.picked.as_ref().and_then(|p| p.component) != before {
+        let highlight = self.picked.as_ref().and_then(|p| p.component);
+        if highlight != self.highlight {
+            self.highlight = highlight;
             self.rebuild_renderer();
         }
         self.compose();
@@ -319,6 +330,34 @@ impl<'t, 's> ViewCore<'t, 's> {
             _ => return false,
         }
         true
+    }
+
+    /// The view as it stands now, to save ([`Viewpoint`]).
+    pub fn viewpoint(&self) -> Viewpoint {
+        Viewpoint {
+            pose: self.cam.pose,
+            fov: self.opts.fov,
+            shader: self.shader,
+            sky: self.sky_on,
+            hidden: self.vis.hidden.clone(),
+            xray: self.vis.xray.clone(),
+            sections: self.vis.sections.clone(),
+            highlight: self.highlight,
+        }
+    }
+
+    /// Goes to a saved view (its sky only if the view has one to light with).
+    pub fn set_viewpoint(&mut self, vp: &Viewpoint) {
+        self.cam.pose = vp.pose;
+        self.opts.fov = vp.fov;
+        self.shader = vp.shader;
+        self.sky_on = vp.sky && self.opts.sky.is_some();
+        self.vis = vp.visibility();
+        self.highlight = vp.highlight;
+        self.picked = None;
+        self.measured = None;
+        self.rebuild_renderer();
+        self.compose();
     }
 
     /// What is shown now (hidden, X-rayed, sections).
@@ -571,7 +610,14 @@ impl<'t, 's> ViewCore<'t, 's> {
     /// Saves the picture (no overlays) as a PNG, tone mapped as `megaray render` does.
     pub fn save_screenshot(&mut self, path: &Path) -> Result<(), ImageError> {
         self.screenshots += 1;
-        self.image().save_png_with(path, &ToneMap::default())
+        self.image().save_png_with(path, &ToneMap::default())?;
+        // Its view beside it, for `megaray render --view` (written whole, then renamed).
+        let json = path.with_extension("view.json");
+        let tmp = path.with_extension("view.json.tmp");
+        let text = self.viewpoint().to_json(self.tracer.scene().components());
+        std::fs::write(&tmp, text + "\n")
+            .and_then(|_| std::fs::rename(&tmp, &json))
+            .map_err(|e| ImageError { path: json.clone(), msg: e.to_string() })
     }
 
     /// Screenshots saved so far (to number the next one).

@@ -12,6 +12,7 @@
 //! | `input.rs` | [`Key`] (by role), [`Event`], [`Script`] |
 //! | `core.rs` | [`ViewCore`], [`ViewOptions`], [`ViewStats`] |
 //! | `overlay.rs` | the statistics line and help drawn over the picture |
+//! | `viewpoint.rs` | [`Viewpoint`]: a saved view (camera, shading, what is shown) as JSON |
 //! | `pick.rs` | [`pick`]: exact picking and measuring through the full-detail index |
 //!
 //! ```no_run
@@ -32,8 +33,10 @@ mod core;
 mod input;
 mod overlay;
 pub mod pick;
+pub mod viewpoint;
 
 pub use crate::camera::{FlyCamera, Pose};
 pub use crate::core::{FrameSource, ViewCore, ViewOptions, ViewStats};
 pub use crate::input::{help_lines, Event, Key, Script, ScriptError, Step};
 pub use crate::pick::{pick, Picked};
+pub use crate::viewpoint::Viewpoint;
