@@ -17,7 +17,7 @@ use clap::Args;
 use image::ImageEncoder;
 use megaray_render::ToneMap;
 use megaray_trace::Tracer;
-use megaray_view::{Event, Key, ViewCore, Viewpoint};
+use megaray_view::{Event, Key, PartOp, ViewCore, Viewpoint};
 use serde_json::{json, Value};
 use tungstenite::protocol::WebSocketConfig;
 use tungstenite::{Message, WebSocket};
@@ -220,8 +220,19 @@ impl Server<'_, '_> {
                     Input::Ack => unacked = unacked.saturating_sub(1),
                     Input::Size(w, h) => match &mut view {
                         Some(v) => v.handle(Event::Resize(w, h)),
-                        None => view = Some(self.view(w, h)?),
+                        None => {
+                            view = Some(self.view(w, h)?);
+                            ws.send(Message::text(self.parts_message()))?;
+                        }
                     },
+                    Input::Part(name, op) => {
+                        let Some(v) = &mut view else { continue };
+                        let comps = self.tracer.scene().components();
+                        match comps.names.iter().position(|n| *n == name) {
+                            Some(c) => v.set_part(c as u32, op),
+                            None => return close(&mut ws, format!("closed: bad message: no part {name:?}")),
+                        }
+                    }
                     Input::View(text) => pending = Some(text),
                     Input::Follow(leader) => {
                         (follow, followed) = (Some(leader), String::new());
@@ -292,6 +303,15 @@ impl Server<'_, '_> {
                 }
             }
         }
+    }
+
+    /// The page's part list: the scene's components (the first [`MAX_LISTED`]) and their
+    /// triangle counts.
+    fn parts_message(&self) -> String {
+        let c = self.tracer.scene().components();
+        let parts: Vec<Value> =
+            c.names.iter().zip(&c.tri_counts).take(MAX_LISTED).map(|(n, t)| json!([n, t])).collect();
+        json!({"kind": "parts", "parts": parts, "total": c.names.len()}).to_string()
     }
 
     /// A new viewer's core, at the page's size.
@@ -385,11 +405,16 @@ enum Input {
     View(String),
     /// Follow page N's view.
     Follow(u64),
+    /// Hide, show, X-ray or isolate the part named so.
+    Part(String, PartOp),
 }
+
+/// Parts the page's list holds at most (it searches within them).
+const MAX_LISTED: usize = 20_000;
 
 /// Reads a page's message: `{"k":"down"|"up","key":CODE}`, `{"k":"drag","dx":X,"dy":Y}`,
 /// `{"k":"wheel","d":N}`, `{"k":"size","w":W,"h":H}`, `{"k":"click","x":X,"y":Y,"measure":B}`,
-/// `{"k":"view","view":{...}}` (a saved view, [`Viewpoint`]), `{"k":"follow","client":N}`,
+/// `{"k":"view","view":{...}}` (a saved view, [`Viewpoint`]), `{"k":"part","name":N,"op":OP}`, `{"k":"follow","client":N}`,
 /// `{"k":"ack"}`.
 fn parse_input(text: &str) -> Result<Input, String> {
     let v: Value = serde_json::from_str(text).map_err(|e| format!("not JSON ({e})"))?;
@@ -418,6 +443,18 @@ fn parse_input(text: &str) -> Result<Input, String> {
         }
         "ack" => Input::Ack,
         "view" => Input::View(v.get("view").filter(|x| x.is_object()).ok_or("no \"view\" object")?.to_string()),
+        "part" => {
+            let name = v.get("name").and_then(Value::as_str).ok_or("no \"name\"")?.to_string();
+            let op = match v.get("op").and_then(Value::as_str) {
+                Some("hide") => PartOp::Hide,
+                Some("show") => PartOp::Show,
+                Some("xray") => PartOp::XRay,
+                Some("solid") => PartOp::Solid,
+                Some("isolate") => PartOp::Isolate,
+                _ => return Err("\"op\" must be hide, show, xray, solid or isolate".into()),
+            };
+            Input::Part(name, op)
+        }
         "follow" => {
             Input::Follow(v.get("client").and_then(Value::as_u64).filter(|&c| c > 0).ok_or("no \"client\" number")?)
         }
@@ -490,6 +527,11 @@ mod tests {
         assert!(parse_input(r#"{"k":"click","x":"a","y":2}"#).is_err());
         assert_eq!(parse_input(r#"{"k":"view","view":{"fov":60}}"#), Ok(Input::View(r#"{"fov":60}"#.into())));
         assert_eq!(parse_input(r#"{"k":"follow","client":3}"#), Ok(Input::Follow(3)));
+        assert_eq!(
+            parse_input(r#"{"k":"part","name":"a/b","op":"xray"}"#),
+            Ok(Input::Part("a/b".into(), PartOp::XRay))
+        );
+        assert!(parse_input(r#"{"k":"part","name":"a/b","op":"melt"}"#).is_err());
         for bad in [r#"{"k":"view","view":3}"#, r#"{"k":"follow","client":0}"#, r#"{"k":"follow"}"#] {
             assert!(parse_input(bad).is_err(), "{bad}");
         }

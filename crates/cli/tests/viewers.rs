@@ -433,3 +433,48 @@ fn a_link_opens_the_same_view_and_a_tab_can_follow_another() {
     wait_until("the bad view's socket to close", 30, || b.eval(&t4, PAGE_STATE)["closed"] == true);
     assert!(http_get(&addr, "/").starts_with("HTTP/1.1 200"));
 }
+
+#[test]
+fn the_page_lists_the_parts_and_hides_one() {
+    if !have(&["chromium"]) {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    // Two named parts: a box (`o wall`) before a plate (`o back`).
+    let obj = dir.path().join("box.obj");
+    std::fs::write(
+        &obj,
+        "o wall\nv -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nv -1 -1 0.2\nv 1 -1 0.2\nv 1 1 0.2\nv -1 1 0.2\n\
+         f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\nf 2 3 7 6\nf 3 4 8 7\nf 4 1 5 8\n\
+         o back\nv -3 -3 -1\nv 3 -3 -1\nv 3 3 -1\nv -3 3 -1\nf 9 10 11 12\n",
+    )
+    .unwrap();
+    let scene = dir.path().join("box.mray");
+    let (code, _, err) = run(&["build", obj.to_str().unwrap(), "-o", scene.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    let (_srv, addr) = serve(&scene);
+    let mut b = Browser::launch();
+    let t = b.tab(&format!("http://{addr}/"));
+    wait_until("the part list", 60, || b.eval(&t, "window.megaray.parts.length") == 2);
+    // Open the list, search, and press the one row's "hide".
+    b.eval(&t, "document.getElementById('partsBtn').click()");
+    b.eval(&t, "(() => { const s = document.getElementById('search'); s.value = 'BACK'; s.dispatchEvent(new Event('input')); })()");
+    assert_eq!(b.eval(&t, "document.querySelectorAll('#list .part').length"), 1);
+    assert_eq!(b.eval(&t, "document.querySelector('#list .part button').textContent"), "hide");
+    b.eval(&t, "document.querySelector('#list .part button').click()");
+    wait_until("the plate hidden", 20, || {
+        b.eval(&t, "JSON.stringify(window.megaray.stats.view.hidden)") == "[\"box.obj/back\"]"
+    });
+    wait_until("its button to say show", 20, || {
+        b.eval(&t, "document.querySelector('#list .part button').textContent") == "show"
+    });
+    // Shown again; then "only" on the wall, from a search for it: the plate hidden again.
+    b.eval(&t, "document.querySelector('#list .part button').click()");
+    wait_until("the plate shown", 20, || b.eval(&t, "JSON.stringify(window.megaray.stats.view.hidden)") == "[]");
+    b.eval(&t, "(() => { const s = document.getElementById('search'); s.value = 'wall'; s.dispatchEvent(new Event('input')); })()");
+    assert_eq!(b.eval(&t, "document.querySelector('#list .part span').textContent"), "box.obj/wall (12)");
+    b.eval(&t, "document.querySelectorAll('#list .part button')[2].click()");
+    wait_until("the wall alone", 20, || {
+        b.eval(&t, "JSON.stringify(window.megaray.stats.view.hidden)") == "[\"box.obj/back\"]"
+    });
+}

@@ -117,6 +117,18 @@ pub struct ViewStats {
     pub moving: bool,
 }
 
+/// What to do with a component ([`ViewCore::set_part`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PartOp {
+    Hide,
+    Show,
+    XRay,
+    /// Not X-rayed.
+    Solid,
+    /// Show only it, or, when it is so already, everything.
+    Isolate,
+}
+
 /// Where a view's frames come from instead of its own pool: a function of the renderer (the
 /// frame's camera, shader, AOVs) and the frame index, such as a cluster of processes
 /// (`megaray-cluster`). Its frames are whole and exact (no frame budget); an error ends the
@@ -313,23 +325,50 @@ impl<'t, 's> ViewCore<'t, 's> {
             v.sections.push(Section::new(Vec3::from(p.position.map(|x| x as f32)) - n * depth, n));
             return true;
         }
-        let Some(c) = p.component.map(|c| c as usize).filter(|&c| c < n) else { return false };
+        let Some(c) = p.component.filter(|&c| (c as usize) < n) else { return false };
+        let op = match k {
+            Key::XRay if v.xray.get(c as usize).copied().unwrap_or(false) => PartOp::Solid,
+            Key::XRay => PartOp::XRay,
+            Key::Hide => PartOp::Hide,
+            _ => PartOp::Isolate,
+        };
+        self.part_op(c, op)
+    }
+
+    /// Changes how component `c` is shown (the viewer's keys on a pick; the page's part
+    /// list); whether anything changed. The renderer follows.
+    pub fn set_part(&mut self, c: u32, op: PartOp) {
+        if self.part_op(c, op) {
+            self.rebuild_renderer();
+            self.compose();
+        }
+    }
+
+    fn part_op(&mut self, c: u32, op: PartOp) -> bool {
+        let n = self.tracer.scene().components().names.len();
+        let c = c as usize;
+        if c >= n {
+            return false;
+        }
+        let v = &mut self.vis;
         for flags in [&mut v.hidden, &mut v.xray] {
             flags.resize(n, false);
         }
-        match k {
-            Key::XRay => v.xray[c] = !v.xray[c],
-            Key::Hide => v.hidden[c] = true,
-            Key::Isolate => {
+        let before = (v.hidden.clone(), v.xray.clone());
+        match op {
+            PartOp::Hide => v.hidden[c] = true,
+            PartOp::Show => v.hidden[c] = false,
+            PartOp::XRay => v.xray[c] = true,
+            PartOp::Solid => v.xray[c] = false,
+            PartOp::Isolate => {
                 // Isolated already (everything else hidden): show all again.
                 let isolated = (0..n).all(|i| v.hidden[i] == (i != c));
                 for (i, h) in v.hidden.iter_mut().enumerate() {
                     *h = !isolated && i != c;
                 }
             }
-            _ => return false,
         }
-        true
+        (v.hidden.clone(), v.xray.clone()) != before
     }
 
     /// The view as it stands now, to save ([`Viewpoint`]).

@@ -36,7 +36,7 @@ pub mod pick;
 pub mod viewpoint;
 
 pub use crate::camera::{FlyCamera, Pose};
-pub use crate::core::{FrameSource, ViewCore, ViewOptions, ViewStats};
+pub use crate::core::{FrameSource, PartOp, ViewCore, ViewOptions, ViewStats};
 pub use crate::input::{help_lines, Event, Key, Script, ScriptError, Step};
 pub use crate::pick::{pick, Picked};
 pub use crate::viewpoint::Viewpoint;
