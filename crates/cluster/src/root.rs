@@ -186,7 +186,7 @@ impl<T: Transport> Cluster<T> {
         let mut frames = 0;
         loop {
             match self.wait_root(None)? {
-                ToWorker::Frame { frame, lod_error, camera, shader, aovs, env: lit } => {
+                ToWorker::Frame { frame, lod_error, camera, shader, aovs, env: lit, highlight, shown } => {
                     if r.settings.shader != shader || r.has_environment() != lit {
                         let mut s = r.settings.clone();
                         s.shader = shader;
@@ -202,6 +202,8 @@ impl<T: Transport> Cluster<T> {
                     }
                     r.settings.camera = camera;
                     r.settings.aovs = aovs;
+                    r.settings.highlight = highlight;
+                    r.settings.visibility = shown;
                     tracer.set_lod_error(lod_error);
                     let silence = 2 * self.opts.timeout + Duration::from_secs(10);
                     relay(&self.t, r, tracer, pool, frame, self.opts.poll, silence)?;
@@ -380,7 +382,8 @@ impl<T: Transport> Cluster<T> {
 fn frame_message(r: &Renderer, tracer: &Tracer, frame: u32) -> (crate::Tag, Vec<u8>) {
     let s = &r.settings;
     let (camera, shader, aovs, env) = (s.camera, s.shader, s.aovs, r.has_environment());
-    ToWorker::Frame { frame, lod_error: tracer.lod_error(), camera, shader, aovs, env }.encode()
+    let (highlight, shown) = (s.highlight, s.visibility.clone());
+    ToWorker::Frame { frame, lod_error: tracer.lod_error(), camera, shader, aovs, env, highlight, shown }.encode()
 }
 
 /// Sends the root's messages: to its own render thread over a channel, to the others over

@@ -3,7 +3,9 @@
 //! a panic or an allocation sized by an unchecked count).
 
 use megaray_base::{Camera, Vec3};
-use megaray_render::{Builtin, Piece, Rect};
+use std::sync::Arc;
+
+use megaray_render::{Builtin, Piece, Rect, Section, Visibility};
 use megaray_trace::jobs::JobStats;
 
 use crate::ClusterError;
@@ -31,8 +33,18 @@ pub enum ToWorker {
     Start(Option<u32>),
     /// Frame `frame` begins, seen by `camera`, with `lod_error` pixels allowed to levels of
     /// detail, shaded by `shader` (with AOVs when `aovs`, under the environment map when
-    /// `env`): what a view changes from frame to frame.
-    Frame { frame: u32, lod_error: f32, camera: Camera, shader: Builtin, aovs: bool, env: bool },
+    /// `env`), the component `highlight`ed and what `shown` (hidden, X-rayed, sections):
+    /// what a view changes from frame to frame.
+    Frame {
+        frame: u32,
+        lod_error: f32,
+        camera: Camera,
+        shader: Builtin,
+        aovs: bool,
+        env: bool,
+        highlight: Option<u32>,
+        shown: Option<Arc<Visibility>>,
+    },
     /// Tiles of frame `frame` to render; none ends one of the worker's lanes.
     Work { frame: u32, rects: Vec<Rect> },
     /// The session ends.
@@ -71,6 +83,28 @@ impl Out {
     fn rect(&mut self, r: &Rect) {
         [r.x0, r.y0, r.x1, r.y1].into_iter().for_each(|v| self.u32(v));
     }
+    /// Per-component flags: their count, then bits packed 32 to a word.
+    fn flags(&mut self, f: &[bool]) {
+        self.u32(f.len() as u32);
+        for w in f.chunks(32) {
+            self.u32(w.iter().enumerate().fold(0, |a, (k, &b)| a | (b as u32) << k));
+        }
+    }
+    fn visibility(&mut self, v: Option<&Visibility>) {
+        let Some(v) = v else { return self.u32(0) };
+        self.u32(1);
+        self.flags(&v.hidden);
+        self.flags(&v.xray);
+        self.u32(v.sections.len() as u32);
+        for s in &v.sections {
+            self.vec3(s.normal);
+            self.f32(s.offset);
+            self.u32(s.only.is_some() as u32);
+            if let Some(o) = &s.only {
+                self.flags(o);
+            }
+        }
+    }
 }
 
 /// Reads little-endian fields, every read checked against the message's length.
@@ -103,6 +137,29 @@ impl<'a> In<'a> {
     fn rect(&mut self) -> Result<Rect, ClusterError> {
         Ok(Rect { x0: self.u32()?, y0: self.u32()?, x1: self.u32()?, y1: self.u32()? })
     }
+    fn flags(&mut self) -> Result<Vec<bool>, ClusterError> {
+        let n = self.u32()? as usize;
+        let words: Vec<u32> = self.pods(n.div_ceil(32))?;
+        Ok((0..n).map(|k| words[k / 32] >> (k % 32) & 1 != 0).collect())
+    }
+    fn visibility(&mut self) -> Result<Option<Visibility>, ClusterError> {
+        if self.u32()? == 0 {
+            return Ok(None);
+        }
+        let (hidden, xray) = (self.flags()?, self.flags()?);
+        let n = self.u32()? as usize;
+        // A section takes at least 20 bytes: no more of them than the bytes left allow.
+        if n > self.b.len() / 20 {
+            return Err(ClusterError::Protocol { rank: self.from, what: "a count past the message's end".into() });
+        }
+        let mut sections = Vec::with_capacity(n);
+        for _ in 0..n {
+            let (normal, offset) = (self.vec3()?, self.f32()?);
+            let only = if self.u32()? != 0 { Some(self.flags()?) } else { None };
+            sections.push(Section { normal, offset, only });
+        }
+        Ok(Some(Visibility { hidden, xray, sections }))
+    }
     /// `n` values of `T` (checked against the bytes left before anything is allocated).
     fn pods<T: bytemuck::Pod>(&mut self, n: usize) -> Result<Vec<T>, ClusterError> {
         let len = n.checked_mul(std::mem::size_of::<T>()).filter(|&l| l <= self.b.len());
@@ -127,7 +184,7 @@ impl ToWorker {
                 o.u32(differs.map_or(u32::MAX, |r| r));
                 START
             }
-            ToWorker::Frame { frame, lod_error, camera: c, shader, aovs, env } => {
+            ToWorker::Frame { frame, lod_error, camera: c, shader, aovs, env, highlight, shown } => {
                 o.u32(*frame);
                 o.f32(*lod_error);
                 [c.eye, c.fwd, c.right, c.up].into_iter().for_each(|v| o.vec3(v));
@@ -136,6 +193,8 @@ impl ToWorker {
                 o.u32(c.height);
                 o.u32(Builtin::ALL.iter().position(|(_, b)| b == shader).unwrap_or(0) as u32);
                 o.u32(*aovs as u32 | (*env as u32) << 1);
+                o.u32(highlight.unwrap_or(u32::MAX));
+                o.visibility(shown.as_deref());
                 FRAME
             }
             ToWorker::Work { frame, rects } => {
@@ -162,7 +221,10 @@ impl ToWorker {
                 let shader =
                     shader.ok_or_else(|| ClusterError::Protocol { rank: from, what: "an unknown shader".into() })?;
                 let flags = i.u32()?;
-                ToWorker::Frame { frame, lod_error, camera, shader, aovs: flags & 1 != 0, env: flags & 2 != 0 }
+                let highlight = Some(i.u32()?).filter(|&c| c != u32::MAX);
+                let shown = i.visibility()?.map(Arc::new);
+                let (aovs, env) = (flags & 1 != 0, flags & 2 != 0);
+                ToWorker::Frame { frame, lod_error, camera, shader, aovs, env, highlight, shown }
             }
             WORK => {
                 let frame = i.u32()?;
@@ -296,8 +358,33 @@ mod tests {
         for m in [
             ToWorker::Start(None),
             ToWorker::Start(Some(3)),
-            ToWorker::Frame { frame: 7, lod_error: 1.5, camera, shader: Builtin::Env, aovs: true, env: false },
-            ToWorker::Frame { frame: 8, lod_error: 0.0, camera, shader: Builtin::Ao, aovs: false, env: true },
+            ToWorker::Frame {
+                frame: 7,
+                lod_error: 1.5,
+                camera,
+                shader: Builtin::Env,
+                aovs: true,
+                env: false,
+                highlight: None,
+                shown: None,
+            },
+            ToWorker::Frame {
+                frame: 8,
+                lod_error: 0.0,
+                camera,
+                shader: Builtin::Ao,
+                aovs: false,
+                env: true,
+                highlight: Some(3),
+                shown: Some(Arc::new(Visibility {
+                    hidden: (0..70).map(|k| k % 3 == 0).collect(),
+                    xray: vec![false, true],
+                    sections: vec![
+                        Section::new(Vec3::X, Vec3::Y),
+                        Section { only: Some(vec![true; 33]), ..Section::new(Vec3::ZERO, -Vec3::Z) },
+                    ],
+                })),
+            },
             ToWorker::Work { frame: 2, rects: vec![Rect { x0: 0, y0: 32, x1: 32, y1: 64 }; 3] },
             ToWorker::Work { frame: 2, rects: Vec::new() },
             ToWorker::Stop,

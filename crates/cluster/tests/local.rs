@@ -63,8 +63,15 @@ fn frames_equal_one_process_bit_for_bit() {
     let (path, _) = megaray_testkit::build_without_lod(dir.path(), &[ply], "plant", Some(4000));
     let scene = Scene::open(&path).unwrap();
     let checksum = scene.header().header_checksum;
-    for aovs in [false, true] {
-        let one = renderer(&scene, aovs);
+    // The third run cuts the model with a section plane: the other ranks learn it from the
+    // frame's message (their own renderers have none).
+    for (aovs, cut) in [(false, false), (true, false), (false, true)] {
+        let mut one = renderer(&scene, aovs);
+        if cut {
+            let b = scene.header().bounds;
+            let sections = vec![Section::new(b.center(), Vec3::new(1.0, 0.2, 0.5))];
+            one.settings.visibility = Some(Arc::new(Visibility { sections, ..Visibility::default() }));
+        }
         let tracer = Tracer::new(&scene);
         let expected: Vec<Frame> = (0..3).map(|f| pool().install(|| render_frame(&one, &tracer, f))).collect();
         let mut ranks = world(3);
@@ -81,6 +88,7 @@ fn frames_equal_one_process_bit_for_bit() {
                     let mut r = renderer(scene, aovs);
                     let mut c = Cluster::join(t, checksum, 1, opts()).unwrap();
                     assert_eq!(c.serve(&mut r, None, &tracer, &pool()).unwrap(), 6);
+                    assert_eq!(r.settings.visibility.is_some(), cut);
                 });
             }
             let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
