@@ -511,7 +511,9 @@ fn build_part(
     let ids: Vec<u64> = recs.iter().map(|t| t.id).collect();
     let tris: Vec<[[f32; 3]; 3]> = recs.iter().map(|t| t.v).collect();
     drop(recs);
-    let (mut blob, tri_source) = build_in_core(&tris, opts.tile_target, parallel, opts.quality);
+    // With components, each leaf's triangles by component (fewer runs of slots).
+    let keys: Option<Vec<u32>> = components.several().then(|| ids.iter().map(|&id| components.of(id)).collect());
+    let (mut blob, tri_source) = build_in_core_keyed(&tris, keys.as_deref(), opts.tile_target, parallel, opts.quality);
     let levels = opts.lod.map(|l| lod::levels(&tris, &l)).unwrap_or_default();
     drop(tris);
     let slot_ids = per_slot(&tri_source, |i| ids[i as usize]);
@@ -567,8 +569,29 @@ pub fn build_in_core(
     parallel: bool,
     quality: Quality,
 ) -> (PartBlob, Vec<u32>) {
+    build_in_core_keyed(tris, None, tile_target, parallel, quality)
+}
+
+/// [`build_in_core`], each leaf's triangles in the order of their `keys` (their components:
+/// a leaf that holds several then makes fewer runs of slots; the order within a leaf is free).
+pub fn build_in_core_keyed(
+    tris: &[[[f32; 3]; 3]],
+    keys: Option<&[u32]>,
+    tile_target: u32,
+    parallel: bool,
+    quality: Quality,
+) -> (PartBlob, Vec<u32>) {
     let cfg = BvhConfig { max_leaf: MAX_LEAF, parallel_above: if parallel { 4096 } else { usize::MAX }, quality };
-    let bvh = build_bvh_of(tris.len(), |i| Aabb::from_points(&tris[i]), cfg);
+    let mut bvh = build_bvh_of(tris.len(), |i| Aabb::from_points(&tris[i]), cfg);
+    if let Some(keys) = keys {
+        for n in &bvh.nodes {
+            for kid in &n.kids {
+                if let bvh::Kid::Leaf { start, count } = *kid {
+                    bvh.order[start as usize..(start + count) as usize].sort_by_key(|&i| keys[i as usize]);
+                }
+            }
+        }
+    }
     let tiled = tiles::tile_part(&bvh, tris, tile_target as u64);
     let blob = PartBlob {
         bounds: bvh.bounds,

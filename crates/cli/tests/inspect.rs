@@ -283,3 +283,22 @@ fn a_saved_view_renders_as_the_viewer_showed_it() {
     let (code, _, err) = run(&["render", s, "--view", saved.to_str().unwrap(), "-q", "-o", png.to_str().unwrap()]);
     assert!(code == 1 && err.contains("roof") && err.contains("view.json") && err.lines().count() == 1, "{err}");
 }
+
+#[test]
+fn a_pbrt_scene_names_its_shapes() {
+    let dir = tempfile::tempdir().unwrap();
+    let pbrt = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/models/pbrt-staircase/staircase.pbrt");
+    let out = dir.path().join("stairs.mray");
+    let (code, _, err) = run(&["build", pbrt.to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, text, err) = run(&["info", out.to_str().unwrap(), "--parts", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let v = json(&text);
+    let list = v["component_list"].as_array().unwrap();
+    assert!(list.len() > 100, "{} components", list.len());
+    // Its shapes are PLY meshes of the object "world": named by their files.
+    assert!(list.iter().all(|c| c["name"].as_str().unwrap().starts_with("world/")), "{:?}", &list[..3]);
+    assert!(list.iter().any(|c| c["name"].as_str().unwrap().ends_with(".ply")));
+    let sum: u64 = list.iter().map(|c| c["triangles"].as_u64().unwrap()).sum();
+    assert_eq!(sum, v["triangles"].as_u64().unwrap());
+}

@@ -69,6 +69,11 @@ pub fn feed_object(
 ) -> Result<u64, ImportError> {
     let mut bytes = 0;
     for s in &obj.shapes {
+        // Each shape a component: its PLY file's name, or the kind and where it was declared.
+        match &s.kind {
+            ShapeKind::Ply(path) => sink.component(&path.file_name().unwrap_or_default().to_string_lossy()),
+            ShapeKind::Mesh { .. } => sink.component(&format!("trianglemesh at {}", s.place)),
+        }
         let normal = s.xform.inverse().unwrap_or(Affine::IDENTITY);
         let flip = s.reverse != (s.xform.determinant() < 0.0);
         let mut moved = Moved { sink: &mut *sink, xform: s.xform, normal, flip, material: s.material };
