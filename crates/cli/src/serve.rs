@@ -482,6 +482,8 @@ fn key_of_code(code: &str) -> Option<Key> {
         "KeyV" => Key::Hide,
         "KeyB" => Key::Isolate,
         "KeyN" => Key::Section,
+        "BracketRight" => Key::CutMore,
+        "BracketLeft" => Key::CutLess,
         "KeyU" => Key::ShowAll,
         "Escape" => Key::Quit,
         _ => return None,

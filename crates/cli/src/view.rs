@@ -40,6 +40,8 @@ Controls:
   V          hide the picked part
   B          show only the picked part / all
   N          section through the picked wall (eye's side cut)
+  ]          move the last section on (cut more)
+  [          move the last section back (cut less)
   U          show everything (no hide, X-ray, section)
   Esc        quit";
 
@@ -139,7 +141,7 @@ pub struct ViewArgs {
     /// No window: replay this script of input (see below) and write every frame to --out.
     /// Script lines: `frames N`, `key NAME down|up` (NAME: forward, back, left, right, up,
     /// down, reset, frame, screenshot, nextshader, togglesky, help, info, xray, hide, isolate,
-    /// section, showall, quit), `drag DX DY`, `wheel N`, `resize W H`, `click X Y [measure]`;
+    /// section, cutmore, cutless, showall, quit), `drag DX DY`, `wheel N`, `resize W H`, `click X Y [measure]`;
     /// `#` starts a comment.
     #[arg(long, value_name = "FILE", requires = "out")]
     pub script: Option<PathBuf>,
@@ -174,6 +176,8 @@ fn key_of(k: minifb::Key) -> Option<Key> {
         K::V => Key::Hide,
         K::B => Key::Isolate,
         K::N => Key::Section,
+        K::RightBracket => Key::CutMore,
+        K::LeftBracket => Key::CutLess,
         K::U => Key::ShowAll,
         K::Escape => Key::Quit,
         _ => return None,

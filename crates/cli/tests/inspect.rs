@@ -200,13 +200,18 @@ fn viewer_keys_hide_show_and_cut_the_picked_part() {
     let scene = scene(dir.path());
     let script = dir.path().join("keys.txt");
     let press = |k: &str| format!("key {k} down\nkey {k} up\nframes 1\n");
+    let tap = |k: &str| format!("key {k} down\nkey {k} up\n");
     let text = format!(
-        "frames 1\nclick 32 24\nframes 1\n{}{}{}{}{}",
+        "frames 1\nclick 32 24\nframes 1\n{}{}{}{}{}{}{}",
         press("hide"),
         press("showall"),
         press("xray"),
         press("showall"),
-        press("section")
+        press("section"),
+        // The plane (z = 0.1, the middle of the wall) moved on past the wall (a step is 1/100 of
+        // the diagonal, 0.087): nothing of it is left; then back into it.
+        tap("cutmore").repeat(3) + "frames 1\n",
+        tap("cutless").repeat(3) + "frames 1\n",
     );
     std::fs::write(&script, text).unwrap();
     let out = dir.path().join("frames");
@@ -215,7 +220,7 @@ fn viewer_keys_hide_show_and_cut_the_picked_part() {
     assert_eq!(code, 0, "{err}");
     let log = std::fs::read_to_string(out.join("frames.jsonl")).unwrap();
     let f: Vec<Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
-    assert_eq!(f.len(), 7);
+    assert_eq!(f.len(), 9);
     assert_eq!(f[1]["picked"]["component"], "box.obj/wall", "{}", f[1]);
     let png = |n: usize| image::open(out.join(format!("frame-{n:05}.png"))).unwrap().to_rgb8();
     let orange = |n: usize| png(n).pixels().filter(|p| p[0] as i32 > p[2] as i32 + 60 && p[1] > p[2]).count();
@@ -229,6 +234,8 @@ fn viewer_keys_hide_show_and_cut_the_picked_part() {
     // A section through the picked point, the eye's side cut: the wall's cut face is capped.
     assert_eq!(f[6]["sections"], 1);
     assert!(caps(&png(7)) > 20, "{} cap pixels", caps(&png(7)));
+    assert_eq!(caps(&png(8)), 0, "cut past the wall");
+    assert!(png(9) == png(7), "and back where it was");
 }
 
 #[test]

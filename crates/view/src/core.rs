@@ -316,6 +316,12 @@ impl<'t, 's> ViewCore<'t, 's> {
             *v = Visibility::default();
             return changed;
         }
+        if let (Key::CutMore | Key::CutLess, Some(s)) = (k, v.sections.last_mut()) {
+            // A step of 1/100 of the model's diagonal (the kept side is where n·p <= offset).
+            let step = 0.01 * self.bounds.diagonal();
+            s.offset += if k == Key::CutMore { -step } else { step };
+            return true;
+        }
         let Some(p) = &self.picked else { return false };
         if k == Key::Section {
             // Facing the eye (the eye's side cut away), through the middle of the wall the
@@ -443,7 +449,9 @@ impl<'t, 's> ViewCore<'t, 's> {
                 self.rebuild_renderer();
             }
             // (`inspect` changes what is shown; the renderer follows when it did.)
-            Key::XRay | Key::Hide | Key::Isolate | Key::Section | Key::ShowAll if self.inspect(k) => {
+            Key::XRay | Key::Hide | Key::Isolate | Key::Section | Key::CutMore | Key::CutLess | Key::ShowAll
+                if self.inspect(k) =>
+            {
                 self.rebuild_renderer()
             }
             Key::Help => self.help = !self.help,

@@ -41,6 +41,10 @@ pub enum Key {
     Isolate,
     /// N: a section plane through the middle of the picked wall, cutting away the eye's side.
     Section,
+    /// ]: the last section plane moves on (it cuts more away).
+    CutMore,
+    /// [: the last section plane moves back (it cuts less).
+    CutLess,
     /// U: show everything (no hidden, X-rayed or isolated components, no sections).
     ShowAll,
     /// Escape.
@@ -68,13 +72,15 @@ impl Key {
             Key::Hide => "V",
             Key::Isolate => "B",
             Key::Section => "N",
+            Key::CutMore => "]",
+            Key::CutLess => "[",
             Key::ShowAll => "U",
             Key::Quit => "Esc",
         }
     }
 
     /// Every key, in the help text's order.
-    pub const ALL: [Key; 19] = [
+    pub const ALL: [Key; 21] = [
         Key::Forward,
         Key::Back,
         Key::Left,
@@ -92,6 +98,8 @@ impl Key {
         Key::Hide,
         Key::Isolate,
         Key::Section,
+        Key::CutMore,
+        Key::CutLess,
         Key::ShowAll,
         Key::Quit,
     ];
@@ -116,6 +124,8 @@ impl Key {
             Key::Hide => "hide the picked part",
             Key::Isolate => "show only the picked part / all",
             Key::Section => "section through the picked wall (eye's side cut)",
+            Key::CutMore => "move the last section on (cut more)",
+            Key::CutLess => "move the last section back (cut less)",
             Key::ShowAll => "show everything (no hide, X-ray, section)",
             Key::Quit => "quit",
         }
