@@ -56,7 +56,7 @@ pub(crate) fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
 // ---------------------------------------------------------------------------------------
 #[derive(Args)]
 pub struct GenArgs {
-    /// What to generate: grid:N, sphereflake:L[:S], plant:T, forest:T[:U] or sky:... (see `megaray gen --help`).
+    /// What to generate: grid:N, sphereflake:L[:S], plant:T, forest:T[:U[:S]] or sky:... (see `megaray gen --help`).
     spec: String,
     /// Output file: binary little-endian PLY for models, .hdr (or .exr) for sky.
     #[arg(short, long, value_name = "FILE")]

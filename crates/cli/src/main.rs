@@ -42,10 +42,11 @@ enum Command {
     ///   grid:N              height field, 2*N*N triangles (as the Embree peer harness)
     ///   sphereflake:L[:S]   Haines sphere flake, L levels, S bands (as the peer harness)
     ///   plant:T             a CAD-like power plant of about T triangles (k/M/G suffixes)
-    ///   forest:T[:U]        the seed's forest as a pbrt-v4 scene (-o forest.pbrt) with its
-    ///                       4 trees (about U triangles each, default 100k) as PLY files
-    ///                       beside it: groves instanced level upon level until at least T
-    ///                       triangles are shown (1e14, 500G, 2T); build it with megaray build
+    ///   forest:T[:U[:S]]    the seed's forest as a pbrt-v4 scene (-o forest.pbrt) with its
+    ///                       S tree species (default 4; about U triangles each, default
+    ///                       100k) as PLY files beside it: groves instanced level upon level
+    ///                       until at least T triangles are shown (1e14, 500G, 2T), S x U
+    ///                       unique; build it with megaray build
     ///   sky[:KEY=V,...]     a procedural sky and sun as a lat-long .hdr (or .exr) environment
     ///                       map, for --env. Keys (defaults):
     ///                         sun_elev   sun elevation, degrees (35)
@@ -58,6 +59,7 @@ enum Command {
     /// Examples:
     ///   megaray gen plant:10M -o plant.ply
     ///   megaray gen forest:1e14 -o forest.pbrt
+    ///   megaray gen forest:1e14:10M:100 -o forest.pbrt      (a billion unique triangles)
     ///   megaray gen sky:sun_elev=20,sun_azim=60,turbidity=4 -o sky.hdr
     #[command(verbatim_doc_comment)]
     Gen(cmd::GenArgs),

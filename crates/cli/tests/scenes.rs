@@ -77,6 +77,21 @@ fn a_forest_shows_trillions_of_triangles_from_a_few_objects() {
     assert!(v["triangles"].as_u64().unwrap() < 20_000, "a few trees and the ground");
     let (code, _, err) = run(&["render", &d("f.mray"), "-o", &d("f.png"), "--res", "64x48", "--shader", "diffuse"]);
     assert_eq!(code, 0, "{err}");
+    // Species as a parameter: 40 of them, each a PLY file and an object, a grove of one of each.
+    let (code, _, err) = run(&["gen", "forest:1e9:2k:40", "-o", &d("g.pbrt")]);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("40 tree files"), "{err}");
+    let (code, _, err) = run(&["build", &d("g.pbrt"), "-o", &d("g.mray")]);
+    assert_eq!(code, 0, "{err}");
+    let (_, out, _) = run(&["info", &d("g.mray"), "--json"]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let tris = v["triangles"].as_u64().unwrap();
+    assert!((40 * 1_900..40 * 2_200 + 10).contains(&tris), "{tris} unique triangles");
+    assert!(v["instances"]["instanced_triangles_f64"].as_f64().unwrap() >= 1e9);
+    for bad in ["forest:1e9:2k:0", "forest:1e9:2k:x", "forest:1e9:2k:4:1"] {
+        let (code, _, err) = run(&["gen", bad, "-o", &d("h.pbrt")]);
+        assert!(code == 1 && err.lines().count() == 1, "{bad}: {err}");
+    }
 }
 
 #[test]

@@ -1,8 +1,10 @@
-//! `forest:T[:U]`: a procedural forest after the seed's, written as a pbrt-v4 scene. A few
-//! tree objects of about `U` triangles each (a trunk and a crown of leaf clusters; default
-//! 100k) are placed as instances in a grove, and the grove is instanced again level upon
-//! level (each level a 4x4 field of the one below, turned at random) until the scene shows
-//! at least `T` triangles (say `1e14`): bytes per instance, not per triangle. The trees are
+//! `forest:T[:U[:S]]`: a procedural forest after the seed's, written as a pbrt-v4 scene. `S`
+//! tree species (default 4), objects of about `U` triangles each (a trunk and a crown of leaf
+//! clusters; default 100k), are placed as instances in a grove (25 trees, or one of each
+//! species when there are more), and the grove is instanced again level upon level (each
+//! level a 4x4 field of the one below, turned at random) until the scene shows at least `T`
+//! triangles (say `1e14`): bytes per instance, not per triangle; `S x U` triangles are
+//! unique (`forest:1e14:10M:100`: a billion). The trees are
 //! binary PLY files beside the scene; levels nest `ObjectInstance` inside `ObjectBegin`
 //! (megaray's extension of pbrt-v4, see `megaray_import::pbrt`).
 
@@ -13,9 +15,11 @@ use megaray_base::{hash32, u01, Progress};
 
 use crate::{GenError, MeshSink, PlyWriter};
 
-/// Tree species (objects) in a forest.
+/// Tree species (objects) in a forest, unless the spec says.
 pub const SPECIES: usize = 4;
-/// Trees in a grove.
+/// The most species a forest may have.
+pub const MAX_SPECIES: usize = 10_000;
+/// Trees in a grove (or one of each species, when there are more).
 pub const GROVE: usize = 25;
 /// Copies of a level in the next (a 4x4 field).
 pub const FIELD: usize = 16;
@@ -27,16 +31,18 @@ pub struct ForestSpec {
     pub shown: f64,
     /// Triangles of each tree, about.
     pub tree_tris: u64,
+    /// Tree species (objects), each its own PLY file.
+    pub species: usize,
     /// Seeds the trees and their places.
     pub seed: u32,
 }
 
 impl std::str::FromStr for ForestSpec {
     type Err = GenError;
-    /// `forest:1e14`, `forest:1e12:20k`.
+    /// `forest:1e14`, `forest:1e12:20k`, `forest:1e14:10M:100`.
     fn from_str(s: &str) -> Result<ForestSpec, GenError> {
         let bad = |w: &str| GenError::spec(s, w.to_string());
-        let rest = s.strip_prefix("forest:").ok_or_else(|| bad("not a forest (forest:T[:U])"))?;
+        let rest = s.strip_prefix("forest:").ok_or_else(|| bad("not a forest (forest:T[:U[:S]])"))?;
         let mut it = rest.split(':');
         let shown = it.next().and_then(parse_big).ok_or_else(|| bad("T: a triangle count such as 1e14 or 500G"))?;
         let tree_tris = match it.next() {
@@ -45,10 +51,18 @@ impl std::str::FromStr for ForestSpec {
                 .ok_or_else(|| bad("U: 1k to 10M triangles a tree"))?,
             None => 1e5,
         };
+        let species = match it.next() {
+            Some(n) => n
+                .parse::<usize>()
+                .ok()
+                .filter(|n| (1..=MAX_SPECIES).contains(n))
+                .ok_or_else(|| bad("S: 1 to 10000 species"))?,
+            None => SPECIES,
+        };
         if it.next().is_some() || !(1.0..=1e20).contains(&shown) {
-            return Err(bad("expected forest:T[:U] with T up to 1e20"));
+            return Err(bad("expected forest:T[:U[:S]] with T up to 1e20"));
         }
-        Ok(ForestSpec { shown, tree_tris: tree_tris as u64, seed: 1 })
+        Ok(ForestSpec { shown, tree_tris: tree_tris as u64, species, seed: 1 })
     }
 }
 
@@ -84,8 +98,8 @@ pub fn write_forest(spec: &ForestSpec, out: &Path, progress: &dyn Progress) -> R
     let dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let mut files = vec![out.to_path_buf()];
     let mut unique = 0u64;
-    let mut tree_tris = [0u64; SPECIES];
-    progress.stage("trees", SPECIES as u64);
+    let mut tree_tris = vec![0u64; spec.species];
+    progress.stage("trees", spec.species as u64);
     for (k, tris) in tree_tris.iter_mut().enumerate() {
         let path = dir.join(format!("{stem}-tree{k}.ply"));
         let mut w = PlyWriter::create(&path)?;
@@ -96,8 +110,11 @@ pub fn write_forest(spec: &ForestSpec, out: &Path, progress: &dyn Progress) -> R
         progress.inc(1);
     }
     progress.finish();
-    // A grove of 25 trees (species in turn), then levels of 4x4 fields of the one below.
-    let grove: f64 = (0..GROVE).map(|i| tree_tris[i % SPECIES] as f64).sum();
+    // A grove of 25 trees (or one of each species), species in turn, then levels of 4x4
+    // fields of the one below.
+    let trees = GROVE.max(spec.species);
+    let side = (trees as f64).sqrt().ceil() as usize;
+    let grove: f64 = (0..trees).map(|i| tree_tris[i % spec.species] as f64).sum();
     let mut levels = 0;
     let mut shown = grove;
     while shown < spec.shown {
@@ -105,7 +122,7 @@ pub fn write_forest(spec: &ForestSpec, out: &Path, progress: &dyn Progress) -> R
         levels += 1;
     }
     let mut s = String::new();
-    let grove_size = 60.0f32;
+    let grove_size = 12.0 * side as f32;
     let _ = writeln!(s, "# megaray gen forest: {} triangles shown, {unique} unique, {levels} levels of groves", shown);
     // From just above the canopy at a corner, across the forest to the horizon.
     let _ = writeln!(s, "LookAt -12 26 -12  120 0 150  0 1 0");
@@ -121,7 +138,7 @@ pub fn write_forest(spec: &ForestSpec, out: &Path, progress: &dyn Progress) -> R
         writeln!(s, "MakeNamedMaterial \"leaves\" \"string type\" \"diffuse\" \"rgb reflectance\" [ 0.12 0.35 0.08 ]");
     let _ =
         writeln!(s, "MakeNamedMaterial \"ground\" \"string type\" \"diffuse\" \"rgb reflectance\" [ 0.3 0.25 0.18 ]");
-    for k in 0..SPECIES {
+    for k in 0..spec.species {
         let _ = writeln!(s, "ObjectBegin \"tree{k}\"\n  NamedMaterial \"leaves\"\n  Shape \"plymesh\" \"string filename\" \"{stem}-tree{k}.ply\"\nObjectEnd");
     }
     let mut rng = spec.seed.wrapping_add(12345);
@@ -130,11 +147,12 @@ pub fn write_forest(spec: &ForestSpec, out: &Path, progress: &dyn Progress) -> R
         u01(rng)
     };
     let _ = writeln!(s, "ObjectBegin \"grove\"");
-    for i in 0..GROVE {
-        let (gx, gz) = ((i % 5) as f32, (i / 5) as f32);
-        let (x, z) = ((gx + 0.2 + 0.6 * rnd()) * grove_size / 5.0, (gz + 0.2 + 0.6 * rnd()) * grove_size / 5.0);
+    for i in 0..trees {
+        let (gx, gz) = ((i % side) as f32, (i / side) as f32);
+        let cell = grove_size / side as f32;
+        let (x, z) = ((gx + 0.2 + 0.6 * rnd()) * cell, (gz + 0.2 + 0.6 * rnd()) * cell);
         let (turn, size) = (360.0 * rnd(), 0.7 + 0.6 * rnd());
-        let _ = writeln!(s, "  AttributeBegin\n    Translate {x} 0 {z}\n    Rotate {turn} 0 1 0\n    Scale {size} {size} {size}\n    ObjectInstance \"tree{}\"\n  AttributeEnd", i % SPECIES);
+        let _ = writeln!(s, "  AttributeBegin\n    Translate {x} 0 {z}\n    Rotate {turn} 0 1 0\n    Scale {size} {size} {size}\n    ObjectInstance \"tree{}\"\n  AttributeEnd", i % spec.species);
     }
     let _ = writeln!(s, "ObjectEnd");
     let mut below = "grove".to_string();
