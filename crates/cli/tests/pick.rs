@@ -4,26 +4,9 @@
 mod common;
 
 use common::*;
-use megaray_base::{intersect_triangle, Camera, Vec3};
+use megaray_base::{Camera, Vec3};
 use megaray_page::Pager;
 use megaray_scene::Scene;
-
-/// The closest hit of `ray` over every full-detail triangle: (t, part, slot in the part).
-fn brute(scene: &Scene, ray: &megaray_base::Ray) -> Option<(f32, u32, u32)> {
-    let mut best: Option<(f32, u32, u32)> = None;
-    for (t, e) in scene.tiles().iter().enumerate() {
-        if scene.parts()[e.part as usize].lod_level != 0 {
-            continue;
-        }
-        for (slot, tri) in scene.tile_view(t as u32).triangles() {
-            let limit = best.map_or(f32::INFINITY, |b| b.0);
-            if let Some(h) = intersect_triangle(ray, tri.map(Vec3::from), limit) {
-                best = Some((h.t, e.part, e.first_slot + slot));
-            }
-        }
-    }
-    best
-}
 
 #[test]
 fn picks_equal_brute_force_mapped_and_paged() {
@@ -45,7 +28,7 @@ fn picks_equal_brute_force_mapped_and_paged() {
             if k != 0 {
                 continue;
             }
-            match brute(&scene, &cam.ray(x as f32 + 0.5, y as f32 + 0.5)) {
+            match megaray_testkit::brute_closest(&scene, &cam.ray(x as f32 + 0.5, y as f32 + 0.5)) {
                 Some(hit) => hits.push(((x, y), hit)),
                 None => misses.push((x, y)),
             }

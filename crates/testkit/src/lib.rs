@@ -188,3 +188,21 @@ pub fn sphere(c: [f32; 3], r: f32, n: usize) -> Vec<Tri> {
     out.retain(|t| !megaray_base::tri_is_degenerate(t));
     out
 }
+
+/// The closest hit of `ray` over every full-detail triangle of `scene`, by brute force:
+/// (t, part, slot in the part). What picks are checked against.
+pub fn brute_closest(scene: &megaray_scene::Scene, ray: &megaray_base::Ray) -> Option<(f32, u32, u32)> {
+    let mut best: Option<(f32, u32, u32)> = None;
+    for (t, e) in scene.tiles().iter().enumerate() {
+        if scene.parts()[e.part as usize].lod_level != 0 {
+            continue;
+        }
+        for (slot, tri) in scene.tile_view(t as u32).triangles() {
+            let limit = best.map_or(f32::INFINITY, |b| b.0);
+            if let Some(h) = megaray_base::intersect_triangle(ray, tri.map(megaray_base::Vec3::from), limit) {
+                best = Some((h.t, e.part, e.first_slot + slot));
+            }
+        }
+    }
+    best
+}

@@ -2,29 +2,11 @@
 //! triangle, where the frame was drawn from coarse levels of detail and where the tiles the
 //! pick needs were not resident (a budget of a few tiles).
 
-use megaray_base::{intersect_triangle, Vec3};
 use megaray_page::{Pager, PagerOptions};
 use megaray_scene::Scene;
 use megaray_testkit::*;
 use megaray_trace::Tracer;
 use megaray_view::{Event, FlyCamera, Pose, ViewCore, ViewOptions};
-
-/// The closest hit of `ray` over every full-detail triangle: (t, part, slot).
-fn brute(scene: &Scene, ray: &megaray_base::Ray) -> Option<(f32, u32, u32)> {
-    let mut best: Option<(f32, u32, u32)> = None;
-    for (t, e) in scene.tiles().iter().enumerate() {
-        if scene.parts()[e.part as usize].lod_level != 0 {
-            continue;
-        }
-        for (slot, tri) in scene.tile_view(t as u32).triangles() {
-            let limit = best.map_or(f32::INFINITY, |b| b.0);
-            if let Some(h) = intersect_triangle(ray, tri.map(Vec3::from), limit) {
-                best = Some((h.t, e.part, e.first_slot + slot));
-            }
-        }
-    }
-    best
-}
 
 #[test]
 fn clicks_pick_full_detail_whatever_the_frame_drew() {
@@ -56,7 +38,7 @@ fn clicks_pick_full_detail_whatever_the_frame_drew() {
             for x in (1..w).step_by(3) {
                 let (sx, sy) = (x as f32 + 0.5, y as f32 + 0.5);
                 view.handle(Event::Click(sx, sy, false));
-                let want = brute(&scene, &cam.ray(sx, sy));
+                let want = brute_closest(&scene, &cam.ray(sx, sy));
                 let got = view.picked().map(|p| (p.t, p.part, p.triangle));
                 match (want, got) {
                     (None, None) => {}
