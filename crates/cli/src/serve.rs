@@ -277,10 +277,12 @@ impl Server<'_, '_> {
                 std::process::exit(1);
             }
             fresh |= busy;
-            let current = v.viewpoint().to_json(self.tracer.scene().components());
-            if let Ok(mut views) = self.views.lock() {
-                if views.get(&client) != Some(&current) {
-                    views.insert(client, current.clone());
+            // The page's view (for its address and its followers) changes only with a frame.
+            let current = (busy || fresh).then(|| v.viewpoint().to_value(self.tracer.scene().components()));
+            if let (Some(c), Ok(mut views)) = (&current, self.views.lock()) {
+                let text = c.to_string();
+                if views.get(&client) != Some(&text) {
+                    views.insert(client, text);
                 }
             }
             if fresh && unacked < MAX_UNACKED {
@@ -291,7 +293,7 @@ impl Server<'_, '_> {
                     "resident_bytes": s.resident, "budget": s.budget, "tiles_in_flight": s.in_flight,
                     "moving": s.moving, "eye": v.pose().eye.to_array(), "yaw": v.pose().yaw,
                     "pitch": v.pose().pitch, "pick": v.pick_lines(), "client": client,
-                    "view": serde_json::from_str::<Value>(&current).unwrap_or(Value::Null),
+                    "view": current.unwrap_or(Value::Null),
                 });
                 ws.send(Message::text(stats.to_string()))?;
                 ws.send(Message::Binary(jpeg(v)?.into()))?;

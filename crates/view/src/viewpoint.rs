@@ -77,6 +77,11 @@ fn flags(comps: &Components, list: Option<&Value>, key: &str) -> Result<Option<V
 impl Viewpoint {
     /// The JSON document, naming components by their names in `comps`.
     pub fn to_json(&self, comps: &Components) -> String {
+        self.to_value(comps).to_string()
+    }
+
+    /// [`Viewpoint::to_json`] as a JSON value.
+    pub fn to_value(&self, comps: &Components) -> Value {
         let n = comps.names.len();
         let hidden = self.hidden.iter().filter(|&&h| h).count();
         let mut v = json!({
@@ -94,7 +99,7 @@ impl Viewpoint {
         } else {
             v["hidden"] = names(comps, &self.hidden, true).into();
         }
-        v.to_string()
+        v
     }
 
     /// Reads a document against the scene's components; `Err` says what is wrong.
