@@ -608,7 +608,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     settings.visibility = a.show.visibility(scene.components())?;
     if let Some(vp) = &viewpoint {
         settings.shader = vp.shader;
-        settings.visibility = Some(std::sync::Arc::new(vp.visibility())).filter(|v| !v.is_empty());
+        settings.visibility = Some(std::sync::Arc::new(vp.shown.clone())).filter(|v| !v.is_empty());
         settings.highlight = vp.highlight;
     }
     let pool = pool(a.threads)?;

@@ -384,9 +384,7 @@ impl<'t, 's> ViewCore<'t, 's> {
             fov: self.opts.fov,
             shader: self.shader,
             sky: self.sky_on,
-            hidden: self.vis.hidden.clone(),
-            xray: self.vis.xray.clone(),
-            sections: self.vis.sections.clone(),
+            shown: self.vis.clone(),
             highlight: self.highlight,
         }
     }
@@ -397,7 +395,7 @@ impl<'t, 's> ViewCore<'t, 's> {
         self.opts.fov = vp.fov;
         self.shader = vp.shader;
         self.sky_on = vp.sky && self.opts.sky.is_some();
-        self.vis = vp.visibility();
+        self.vis = vp.shown.clone();
         self.highlight = vp.highlight;
         self.picked = None;
         self.measured = None;

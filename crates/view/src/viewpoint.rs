@@ -29,10 +29,8 @@ pub struct Viewpoint {
     pub shader: Builtin,
     /// Whether the sky lights the scene (the viewer's K).
     pub sky: bool,
-    /// Per component, as in [`Visibility`].
-    pub hidden: Vec<bool>,
-    pub xray: Vec<bool>,
-    pub sections: Vec<Section>,
+    /// What is shown: hidden and X-rayed components, sections.
+    pub shown: Visibility,
     /// The highlighted (picked) component.
     pub highlight: Option<u32>,
 }
@@ -83,21 +81,22 @@ impl Viewpoint {
     /// [`Viewpoint::to_json`] as a JSON value.
     pub fn to_value(&self, comps: &Components) -> Value {
         let n = comps.names.len();
-        let hidden = self.hidden.iter().filter(|&&h| h).count();
+        let s = &self.shown;
+        let hidden = s.hidden.iter().filter(|&&h| h).count();
         let mut v = json!({
             "eye": self.pose.eye.to_array(), "yaw": self.pose.yaw, "pitch": self.pose.pitch, "fov": self.fov,
             "shader": self.shader.name(), "sky": self.sky,
-            "xray": names(comps, &self.xray, true),
-            "sections": self.sections.iter().map(|s| json!({
+            "xray": names(comps, &s.xray, true),
+            "sections": s.sections.iter().map(|s| json!({
                 "normal": s.normal.to_array(), "offset": s.offset,
                 "only": s.only.as_ref().map(|o| names(comps, o, true)),
             })).collect::<Vec<_>>(),
             "highlight": self.highlight.map(|c| comps.name(c)),
         });
         if hidden * 2 > n {
-            v["shown"] = names(comps, &self.hidden, false).into();
+            v["shown"] = names(comps, &s.hidden, false).into();
         } else {
-            v["hidden"] = names(comps, &self.hidden, true).into();
+            v["hidden"] = names(comps, &s.hidden, true).into();
         }
         v
     }
@@ -152,12 +151,7 @@ impl Viewpoint {
             ),
         };
         let sky = v.get("sky").and_then(Value::as_bool).unwrap_or(false);
-        Ok(Viewpoint { pose, fov, shader, sky, hidden, xray, sections, highlight })
-    }
-
-    /// What it shows, as the renderer takes it.
-    pub fn visibility(&self) -> Visibility {
-        Visibility { hidden: self.hidden.clone(), xray: self.xray.clone(), sections: self.sections.clone() }
+        Ok(Viewpoint { pose, fov, shader, sky, shown: Visibility { hidden, xray, sections }, highlight })
     }
 }
 
@@ -179,15 +173,18 @@ mod tests {
             fov: 45.0,
             shader: Builtin::Env,
             sky: true,
-            hidden: vec![false, true, false, false, false],
-            xray: vec![false, false, true, false, false],
-            sections: vec![Section { only: Some(only), ..Section::new(Vec3::Z, Vec3::Y) }],
+            shown: Visibility {
+                hidden: vec![false, true, false, false, false],
+                xray: vec![false, false, true, false, false],
+                sections: vec![Section { only: Some(only), ..Section::new(Vec3::Z, Vec3::Y) }],
+            },
             highlight: Some(4),
         };
         let text = vp.to_json(&c);
         assert_eq!(Viewpoint::from_json(&text, &c).unwrap(), vp);
         // Isolated: one name, not the rest.
-        let iso = Viewpoint { hidden: vec![true, true, true, false, true], ..vp.clone() };
+        let mut iso = vp.clone();
+        iso.shown.hidden = vec![true, true, true, false, true];
         let text = iso.to_json(&c);
         assert!(text.contains("\"shown\":[\"m.obj/p3\"]") && !text.contains("hidden"), "{text}");
         assert_eq!(Viewpoint::from_json(&text, &c).unwrap(), iso);
