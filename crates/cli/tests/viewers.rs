@@ -50,6 +50,14 @@ impl Drop for Proc {
     }
 }
 
+/// The window and browser tests one at a time: on 2 cores, three Chromiums starting beside
+/// the window kept it from appearing within its wait.
+static GUI: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn gui_turn() -> std::sync::MutexGuard<'static, ()> {
+    GUI.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn wait_until(what: &str, secs: u64, mut f: impl FnMut() -> bool) {
     let t0 = Instant::now();
     while !f() {
@@ -176,6 +184,7 @@ fn the_window_opens_draws_reacts_saves_and_quits() {
     if !have(&["Xvfb", "xdotool", "xwd"]) {
         return;
     }
+    let _turn = gui_turn();
     let dir = tempfile::tempdir().unwrap();
     let scene = scene(dir.path());
     let d = display();
@@ -345,6 +354,7 @@ fn the_page_in_a_browser_shows_frames_and_flies() {
     if !have(&["chromium"]) {
         return;
     }
+    let _turn = gui_turn();
     let dir = tempfile::tempdir().unwrap();
     let scene = scene(dir.path());
     let (_srv, addr) = serve(&scene);
@@ -394,6 +404,7 @@ fn a_link_opens_the_same_view_and_a_tab_can_follow_another() {
     if !have(&["chromium"]) {
         return;
     }
+    let _turn = gui_turn();
     let dir = tempfile::tempdir().unwrap();
     let scene = scene(dir.path());
     let (_srv, addr) = serve(&scene);
@@ -439,6 +450,7 @@ fn the_page_lists_the_parts_and_hides_one() {
     if !have(&["chromium"]) {
         return;
     }
+    let _turn = gui_turn();
     let dir = tempfile::tempdir().unwrap();
     // Two named parts: a box (`o wall`) before a plate (`o back`).
     let obj = dir.path().join("box.obj");
