@@ -1,5 +1,7 @@
 use glam::Vec3;
 
+use crate::Aabb;
+
 /// A ray: origin, direction (not necessarily normalised) and the parametric interval
 /// `[t_min, t_max]` in which hits count. 32 bytes, in this order (the assembly kernel of
 /// `megaray-trace` reads them so).
@@ -67,6 +69,48 @@ impl Rays16 {
         p
     }
 
+    /// Which lanes may enter `b` within their `[t_min, t_max]` (bit `i`: lane `i`; lanes past
+    /// `len` clear). Conservative: the box is tested grown by a margin far above the test's
+    /// rounding, so a clear bit means the ray surely misses everything inside `b` (a
+    /// renderer answers those rays with the background, without a trace). In loops the
+    /// compiler vectorizes.
+    pub fn entering(&self, b: &Aabb) -> u16 {
+        if !(b.min[0] <= b.max[0] && b.min[1] <= b.max[1] && b.min[2] <= b.max[2]) {
+            return 0; // an empty box (a scene without triangles)
+        }
+        // The margin, per lane: relative to the box and to how far the origin is from it
+        // (the distances the test multiplies). An axis where 0 times infinity gives NaN (an
+        // origin on a face of the grown box, parallel to it) constrains nothing.
+        let ext = (b.max[0] - b.min[0]).max(b.max[1] - b.min[1]).max(b.max[2] - b.min[2]);
+        let c = [0.5 * (b.min[0] + b.max[0]), 0.5 * (b.min[1] + b.max[1]), 0.5 * (b.min[2] + b.max[2])];
+        let mut m = [0.0f32; 16];
+        for i in 0..16 {
+            let reach =
+                ext + (self.org[0][i] - c[0]).abs() + (self.org[1][i] - c[1]).abs() + (self.org[2][i] - c[2]).abs();
+            m[i] = reach * 1e-4 + f32::MIN_POSITIVE;
+        }
+        let mut near = [0.0f32; 16];
+        let mut far = [0.0f32; 16];
+        for i in 0..16 {
+            (near[i], far[i]) = (t_start(self.t_min[i]), self.t_max[i]);
+        }
+        for a in 0..3 {
+            for i in 0..16 {
+                let (lo, hi) = (b.min[a] - m[i], b.max[a] + m[i]);
+                let inv = 1.0 / self.dir[a][i];
+                let (t0, t1) = ((lo - self.org[a][i]) * inv, (hi - self.org[a][i]) * inv);
+                near[i] = near[i].max(t0.min(t1));
+                far[i] = far[i].min(t0.max(t1));
+            }
+        }
+        let mut mask = 0u16;
+        for i in 0..self.len.min(16) {
+            let miss = near[i] > far[i] * (1.0 + 1e-5);
+            mask |= (!miss as u16) << i;
+        }
+        mask
+    }
+
     /// The ray in lane `i`.
     #[inline]
     pub fn ray(&self, i: usize) -> Ray {
@@ -104,6 +148,73 @@ pub fn intersect_triangle(ray: &Ray, tri: [Vec3; 3], t_max: f32) -> Option<TriHi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Whether `r` meets box `b` within its interval, in f64 (`m`: the box grown by that).
+    fn meets(r: &Ray, b: &Aabb, m: f64) -> bool {
+        let (mut near, mut far) = (t_start(r.t_min) as f64, r.t_max as f64);
+        for a in 0..3 {
+            let (lo, hi) = (b.min[a] as f64 - m, b.max[a] as f64 + m);
+            let (o, d) = (r.org[a] as f64, r.dir[a] as f64);
+            if d == 0.0 {
+                if o < lo || o > hi {
+                    return false;
+                }
+                continue;
+            }
+            let (t0, t1) = ((lo - o) / d, (hi - o) / d);
+            near = near.max(t0.min(t1));
+            far = far.min(t0.max(t1));
+        }
+        near <= far
+    }
+
+    /// `entering` keeps every ray that meets the box (exactly, in f64), and clears rays
+    /// that miss it by more than ten times its margin; lanes past `len` are clear.
+    #[test]
+    fn entering_is_conservative_and_tight() {
+        let b = Aabb { min: [-1.0, 2.0, -0.5], max: [3.0, 2.5, 4.0] };
+        let mut x = 0x2545_f491u32;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x as f32 / u32::MAX as f32
+        };
+        let (mut kept, mut cleared) = (0, 0);
+        for round in 0..4000 {
+            let far = if round % 2 == 0 { 10.0 } else { 1000.0 };
+            let rays: Vec<Ray> = (0..16)
+                .map(|i| {
+                    let org = Vec3::new(next() - 0.5, next() - 0.5, next() - 0.5) * far + Vec3::new(1.0, 2.2, 1.5);
+                    // Aimed near the box, some exactly along an axis.
+                    let to = Vec3::new(next() * 6.0 - 2.0, next() * 2.0 + 1.2, next() * 6.0 - 1.5);
+                    let mut dir = to - org;
+                    if i % 5 == 0 {
+                        dir[i % 3] = 0.0;
+                    }
+                    let t_max = if i % 7 == 0 { next() * far } else { f32::INFINITY };
+                    Ray { org, dir, t_min: if i % 3 == 0 { 0.5 } else { 0.0 }, t_max }
+                })
+                .collect();
+            let len = 1 + round % 16;
+            let p = Rays16::from_rays(&rays[..len]);
+            let mask = p.entering(&b);
+            assert_eq!((mask as u32) >> len, 0, "lanes past len are clear");
+            for (i, r) in rays[..len].iter().enumerate() {
+                let bit = mask & (1 << i) != 0;
+                if meets(r, &b, 0.0) {
+                    assert!(bit, "a ray that meets the box is kept: {r:?}");
+                    kept += 1;
+                } else if !meets(r, &b, far as f64 * 1e-3) {
+                    assert!(!bit, "a ray far from the box is cleared: {r:?}");
+                    cleared += 1;
+                }
+            }
+        }
+        assert!(kept > 1000 && cleared > 1000, "both cases tested: {kept} kept, {cleared} cleared");
+        let empty = Aabb { min: [f32::INFINITY; 3], max: [f32::NEG_INFINITY; 3] };
+        assert_eq!(Rays16::from_rays(&[Ray::new(Vec3::ZERO, Vec3::X)]).entering(&empty), 0);
+    }
 
     /// `t_start` gives `+0.0` (its bits) for everything not above 0, and a positive value
     /// itself; the scalar test counts a negative `t_min` as 0 (no hit behind the origin).

@@ -489,6 +489,40 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
 fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
     let (w, h) = (r.settings.camera.width, r.settings.camera.height);
     let aovs = r.settings.aovs;
+    if !aovs {
+        // Bands of rows, each written in place: within a band, 32-pixel columns a row's
+        // group at a time (`rows`). No per-tile buffers, no copies.
+        let mut f = Frame::blank(w, h, false);
+        let band = (BAND_ROWS * w) as usize;
+        f.rays = f
+            .image
+            .pixels
+            .par_chunks_mut(band)
+            .enumerate()
+            .map(|(b, px)| {
+                let mut caster = tracer;
+                let y0 = b as u32 * BAND_ROWS;
+                let rows = px.len() as u32 / w;
+                let mut rays = 0u64;
+                for x0 in (0..w).step_by(TILE as usize) {
+                    let x1 = (x0 + TILE).min(w);
+                    for y in y0..y0 + rows {
+                        for gx in (x0..x1).step_by(rows::GROUP) {
+                            let g = rows::Group { y, x0: gx, step: 1, len: (x1 - gx).min(rows::GROUP as u32) };
+                            let out = r.group(g, frame, &mut caster).expect("a plain in-core Tracer never suspends");
+                            let at = ((y - y0) * w + gx) as usize;
+                            px[at..at + g.len as usize].copy_from_slice(&out.rgb[..g.len as usize]);
+                            rays += out.rays as u64;
+                        }
+                    }
+                }
+                rays
+            })
+            .sum();
+        f.jobs.finished = (w * h) as u64;
+        f.jobs.rays = f.rays;
+        return f;
+    }
     let tiles_x = w.div_ceil(TILE);
     let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
     // Per tile: its pixels in row order (and AOVs only when asked: the buffers are rebuilt
@@ -498,19 +532,6 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
         .map(|&(tx, ty)| {
             let mut caster = tracer;
             let mut out = TileOut::default();
-            if !aovs {
-                // Rows of the tile a group at a time (`rows`).
-                for y in ty * TILE..((ty + 1) * TILE).min(h) {
-                    let (x0, x1) = (tx * TILE, ((tx + 1) * TILE).min(w));
-                    for gx in (x0..x1).step_by(rows::GROUP) {
-                        let g = rows::Group { y, x0: gx, step: 1, len: (x1 - gx).min(rows::GROUP as u32) };
-                        let px = r.group(g, frame, &mut caster).expect("a plain in-core Tracer never suspends");
-                        out.color.extend_from_slice(&px.rgb[..g.len as usize]);
-                        out.rays += px.rays as u64;
-                    }
-                }
-                return out;
-            }
             for y in ty * TILE..((ty + 1) * TILE).min(h) {
                 for x in tx * TILE..((tx + 1) * TILE).min(w) {
                     let s = r.pixel(x, y, frame, &mut caster).expect("a plain in-core Tracer never suspends");
@@ -547,6 +568,9 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
     f.jobs.rays = f.rays;
     f
 }
+
+/// Rows of a task of [`render_in_core`] without AOVs: bands this tall, the whole width.
+const BAND_ROWS: u32 = 8;
 
 /// The pixels of one tile, row by row.
 #[derive(Default)]

@@ -9,6 +9,7 @@
 //! [`Camera::rays16`]: megaray_base::Camera::rays16
 //! [`Camera::ray`]: megaray_base::Camera::ray
 
+use megaray_base::Vec3;
 use megaray_trace::{RayCaster, Suspended};
 
 use crate::frame::{Renderer, TILE};
@@ -102,7 +103,18 @@ impl Renderer {
             let sx: [f32; 16] = std::array::from_fn(|k| (g.x0 + g.step * k.min(len - 1) as u32) as f32 + ox);
             self.settings.camera.rays16(&sx, &[g.y as f32 + oy; 16])
         });
+        // Camera rays that miss the caster's box are the background, with no query (most of
+        // a distant model's view): the same answer the trace would give.
+        let entering = match (&rays, caster.bounds()) {
+            (Some(rays), Some(b)) => rays.entering(&b),
+            _ => u16::MAX,
+        };
         for k in 0..len {
+            if entering & (1 << k) == 0 {
+                out.rgb[k] = self.background(rays.as_ref().map_or(Vec3::ZERO, |r| r.ray(k).dir)).to_array();
+                out.rays += 1;
+                continue;
+            }
             // A pixel finished in an earlier run of this job (before it was suspended) is
             // recalled, not redone: the job needs one pixel's tiles at a time.
             if let Some(m) = caster.recall() {

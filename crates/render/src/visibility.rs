@@ -193,6 +193,9 @@ impl<C: RayCaster + ?Sized> RayCaster for Filtered<'_, C> {
     fn scene(&self) -> &Scene {
         self.inner.scene()
     }
+    fn bounds(&self) -> Option<megaray_base::Aabb> {
+        self.inner.bounds()
+    }
     fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended> {
         self.closest(ray, None)
     }

@@ -259,6 +259,9 @@ impl RayCaster for Replay<'_, '_> {
     fn scene(&self) -> &Scene {
         self.tracer.scene()
     }
+    fn bounds(&self) -> Option<megaray_base::Aabb> {
+        Some(self.tracer.bounds)
+    }
     fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended> {
         self.query(ray, false, None)
     }

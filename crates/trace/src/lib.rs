@@ -148,6 +148,12 @@ pub trait RayCaster {
         let _ = cone;
         self.occluded(ray)
     }
+    /// A box that every ray with a hit enters, if the caster knows one (the scene's, or its
+    /// instances' as they stand): a ray that misses it misses everything, and a renderer may
+    /// answer it without a query ([`megaray_base::Rays16::entering`]).
+    fn bounds(&self) -> Option<megaray_base::Aabb> {
+        None
+    }
     /// Whether a stand-in answered some ray since the last call (the result made from those
     /// rays is approximate), and forgets it. A caster without stand-ins never does.
     fn take_approx(&mut self) -> bool {
@@ -178,6 +184,9 @@ pub type Memo = [u32; 5];
 impl RayCaster for &Tracer<'_> {
     fn scene(&self) -> &Scene {
         self.scene
+    }
+    fn bounds(&self) -> Option<megaray_base::Aabb> {
+        Some(self.bounds)
     }
     fn intersect(&mut self, ray: &Ray) -> Result<Option<Hit>, Suspended> {
         Ok(Tracer::intersect(self, ray))
