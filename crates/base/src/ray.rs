@@ -74,6 +74,7 @@ impl Rays16 {
     /// rounding, so a clear bit means the ray surely misses everything inside `b` (a
     /// renderer answers those rays with the background, without a trace). In loops the
     /// compiler vectorizes.
+    #[allow(clippy::needless_range_loop)] // lane loops over several arrays, to vectorize
     pub fn entering(&self, b: &Aabb) -> u16 {
         if !(b.min[0] <= b.max[0] && b.min[1] <= b.max[1] && b.min[2] <= b.max[2]) {
             return 0; // an empty box (a scene without triangles)
