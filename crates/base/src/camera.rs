@@ -58,6 +58,14 @@ impl Camera {
     /// same operations in the same order, so the same bits, in loops the compiler vectorizes.
     /// As the packet kernel reads them ([`Rays16`]: structure of arrays).
     pub fn rays16(&self, px: &[f32; 16], py: &[f32; 16]) -> Rays16 {
+        crate::wide::dispatch!(self.rays16_in(px, py), Camera::rays16_avx512, Camera::rays16_avx2)
+    }
+
+    crate::wide::compiled_for!(rays16_avx512, rays16_avx2, rays16_in(&self, px: &[f32; 16], py: &[f32; 16]) -> Rays16);
+
+    /// [`Camera::rays16`] as written, compiled for whichever instruction set calls it.
+    #[inline(always)]
+    pub(crate) fn rays16_in(&self, px: &[f32; 16], py: &[f32; 16]) -> Rays16 {
         let aspect = self.width as f32 / self.height as f32;
         let (w, h) = (self.width as f32, self.height as f32);
         let (f, r, u) = (self.fwd, self.right, self.up);
@@ -101,6 +109,13 @@ mod tests {
                     let px: [f32; 16] = std::array::from_fn(|i| (x0 + i as u32 % 4) as f32 + 0.5);
                     let py: [f32; 16] = std::array::from_fn(|i| (y0 + i as u32 / 4) as f32 + 0.5);
                     let batch = cam.rays16(&px, &py);
+                    let plain = cam.rays16_in(&px, &py);
+                    #[cfg(target_arch = "x86_64")]
+                    if std::arch::is_x86_feature_detected!("avx2") {
+                        // SAFETY: the CPU has AVX2.
+                        let two = unsafe { cam.rays16_avx2(&px, &py) };
+                        assert_eq!(two.dir.map(|a| a.map(f32::to_bits)), plain.dir.map(|a| a.map(f32::to_bits)));
+                    }
                     for i in 0..16 {
                         let one = cam.ray(px[i], py[i]);
                         let batch = batch.ray(i);
@@ -108,6 +123,8 @@ mod tests {
                         assert_eq!(batch.t_max, one.t_max);
                         assert_eq!(batch.dir.to_array().map(f32::to_bits), one.dir.to_array().map(f32::to_bits));
                         assert_eq!(batch.org, one.org);
+                        // The dispatched path (AVX-512 or AVX2 here) equals the baseline's.
+                        assert_eq!(plain.ray(i).dir.to_array().map(f32::to_bits), one.dir.to_array().map(f32::to_bits));
                     }
                 }
             }

@@ -27,6 +27,7 @@ mod progress;
 mod ray;
 mod size;
 pub mod temp;
+mod wide;
 
 pub use aabb::Aabb;
 pub use affine::Affine;

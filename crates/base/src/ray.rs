@@ -74,8 +74,16 @@ impl Rays16 {
     /// rounding, so a clear bit means the ray surely misses everything inside `b` (a
     /// renderer answers those rays with the background, without a trace). In loops the
     /// compiler vectorizes.
-    #[allow(clippy::needless_range_loop)] // lane loops over several arrays, to vectorize
     pub fn entering(&self, b: &Aabb) -> u16 {
+        crate::wide::dispatch!(self.entering_in(b), Rays16::entering_avx512, Rays16::entering_avx2)
+    }
+
+    crate::wide::compiled_for!(entering_avx512, entering_avx2, entering_in(&self, b: &Aabb) -> u16);
+
+    /// [`Rays16::entering`] as written, compiled for whichever instruction set calls it.
+    #[inline(always)]
+    #[allow(clippy::needless_range_loop)] // lane loops over several arrays, to vectorize
+    pub(crate) fn entering_in(&self, b: &Aabb) -> u16 {
         if !(b.min[0] <= b.max[0] && b.min[1] <= b.max[1] && b.min[2] <= b.max[2]) {
             return 0; // an empty box (a scene without triangles)
         }
@@ -200,6 +208,12 @@ mod tests {
             let len = 1 + round % 16;
             let p = Rays16::from_rays(&rays[..len]);
             let mask = p.entering(&b);
+            assert_eq!(mask, p.entering_in(&b), "the dispatched path equals the baseline's");
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2.
+                assert_eq!(mask, unsafe { p.entering_avx2(&b) }, "the AVX2 path equals the baseline's");
+            }
             assert_eq!((mask as u32) >> len, 0, "lanes past len are clear");
             for (i, r) in rays[..len].iter().enumerate() {
                 let bit = mask & (1 << i) != 0;
