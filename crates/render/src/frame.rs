@@ -447,21 +447,47 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
         f.jobs = run.stats;
         let partial = f.jobs.unfinished > 0;
         let mut pixels = 0u64;
-        for (i, out) in run.into_finished() {
-            let g = groups[i];
-            for k in 0..g.len as usize {
-                let p = g.index(k, w);
-                if partial {
-                    finished.push(p as u32);
-                }
-                if out.approx & (1 << k) != 0 {
-                    approx.push(p as u32);
-                }
-                f.image.pixels[p] = out.rgb[k];
-            }
+        let outs: Vec<(usize, &rows::GroupOut)> = run.finished().collect();
+        // The finished groups by row (a counting sort), then written into the image by bands
+        // of rows on all threads: a pass's groups are scattered over the whole image.
+        let mut start = vec![0u32; h as usize + 1];
+        for (i, out) in &outs {
+            let g = groups[*i];
+            start[g.y as usize + 1] += 1;
             f.rays += out.rays as u64;
             pixels += g.len as u64;
+            for k in 0..g.len as usize {
+                let p = g.index(k, w) as u32;
+                if partial {
+                    finished.push(p);
+                }
+                if out.approx & (1 << k) != 0 {
+                    approx.push(p);
+                }
+            }
         }
+        for y in 0..h as usize {
+            start[y + 1] += start[y];
+        }
+        let mut by_row = vec![0u32; outs.len()];
+        let mut at = start.clone();
+        for (j, (i, _)) in outs.iter().enumerate() {
+            let y = groups[*i].y as usize;
+            by_row[at[y] as usize] = j as u32;
+            at[y] += 1;
+        }
+        f.image.pixels.par_chunks_mut((BAND_ROWS * w) as usize).enumerate().for_each(|(b, px)| {
+            let y0 = b as u32 * BAND_ROWS;
+            for y in y0..y0 + px.len() as u32 / w {
+                for &j in &by_row[start[y as usize] as usize..start[y as usize + 1] as usize] {
+                    let (i, out) = &outs[j as usize];
+                    let g = groups[*i];
+                    for k in 0..g.len as usize {
+                        px[g.index(k, w) - (y0 * w) as usize] = out.rgb[k];
+                    }
+                }
+            }
+        });
         // The loop's counts are of jobs; the frame's, of pixels.
         (f.jobs.finished, f.jobs.unfinished) = (pixels, n as u64 - pixels);
     }

@@ -71,18 +71,21 @@ pub(crate) fn tile_groups(w: u32, h: u32, backward: bool) -> Vec<Group> {
 }
 
 /// The groups of a frame against a deadline: the passes of [`crate::frame::PASSES`] (one pixel
-/// of every 4x4 block a pass), tile by tile, tiles backward when `backward`.
+/// of every 4x4 block a pass); within a pass, bands of 32 rows (a row of tiles), each row of
+/// the band across pairs of tiles (a group's 16 pixels, 4 apart, span 64: two tiles), bands
+/// and pairs backward when `backward`.
 pub(crate) fn interleaved_groups(w: u32, h: u32, backward: bool) -> Vec<Group> {
-    let mut tiles: Vec<(u32, u32)> =
-        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty))).collect();
+    const SPAN: u32 = 2 * TILE;
+    let mut blocks: Vec<(u32, u32)> =
+        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(SPAN)).map(move |bx| (bx, ty))).collect();
     if backward {
-        tiles.reverse();
+        blocks.reverse();
     }
     let mut out = Vec::new();
     for &(dx, dy) in &crate::frame::PASSES {
-        for &(tx, ty) in &tiles {
+        for &(bx, ty) in &blocks {
             for y in (ty * TILE + dy..((ty + 1) * TILE).min(h)).step_by(4) {
-                push_row(&mut out, y, (tx * TILE + dx..((tx + 1) * TILE).min(w)).step_by(4), 4);
+                push_row(&mut out, y, (bx * SPAN + dx..((bx + 1) * SPAN).min(w)).step_by(4), 4);
             }
         }
     }

@@ -83,6 +83,11 @@ pub struct JobsResult<T> {
 
 impl<T> JobsResult<T> {
     /// (job index, value) of every finished job, in no particular order.
+    pub fn finished(&self) -> impl Iterator<Item = (usize, &T)> {
+        self.per_thread.iter().flatten().map(|(i, v)| (*i as usize, v))
+    }
+
+    /// The finished jobs' results, moved out (as [`Run::finished`]).
     pub fn into_finished(self) -> impl Iterator<Item = (usize, T)> {
         self.per_thread.into_iter().flatten().map(|(i, v)| (i as usize, v))
     }
