@@ -33,7 +33,7 @@ const MAX_HEAD: usize = 16 << 10;
 const MAX_MESSAGE: usize = 4 << 10;
 /// Frames sent and not yet acknowledged by the page: more waits (a slow link gets fewer
 /// frames, not a queue of old ones).
-const MAX_UNACKED: u32 = 2;
+const MAX_UNACKED: u32 = 3;
 /// The largest view a page may ask for.
 const MAX_SIDE: u32 = 2560;
 /// JPEG quality of the frames.
