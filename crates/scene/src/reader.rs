@@ -30,29 +30,9 @@ pub fn drop_page_cache(file: &File, off: u64, len: u64) {
 const TILE_UNCHECKED: u8 = 0;
 const TILE_OK: u8 = 1;
 
-/// Which tiles have been checked and found sound ([`Scene::checked_tiles`]): a tile once
-/// checked stays so, so a `true` never goes stale.
-#[derive(Clone, Copy)]
-pub struct CheckedTiles<'a>(&'a [AtomicU8]);
+mod checked;
+pub use checked::CheckedTiles;
 
-impl CheckedTiles<'_> {
-    /// A view in which no tile counts as checked (for a reader that must ask about every
-    /// tile elsewhere, such as a paged tracer).
-    pub const NONE: CheckedTiles<'static> = CheckedTiles(&[]);
-
-    /// Whether this is [`CheckedTiles::NONE`].
-    pub fn is_none(&self) -> bool {
-        self.0.is_empty()
-    }
-
-    /// Whether tile `t` has been checked and found sound. Relaxed: the check publishes
-    /// nothing but its verdict (the tile's bytes are the file's, never written), and a
-    /// relaxed load lets the tracer's loop keep its other loads out of the loop.
-    #[inline(always)]
-    pub fn get(&self, t: u32) -> bool {
-        self.0.get(t as usize).is_some_and(|s| s.load(Ordering::Relaxed) == TILE_OK)
-    }
-}
 const TILE_CORRUPT: u8 = 2;
 
 /// An open, checked scene file: mapped, or owned by a pager ([`Scene::open_owned`]).
@@ -63,6 +43,9 @@ pub struct Scene {
     tile_state: Vec<AtomicU8>,
     /// How many of `tile_state` are [`TILE_OK`] ([`Scene::all_tiles_checked`]).
     tiles_ok: AtomicU32,
+    /// Every tile checked but the root tiles of parts with levels of detail
+    /// ([`Scene::checked_but_lod_roots`]), made when first asked for.
+    lod_stops: OnceLock<Vec<AtomicU8>>,
     first_error: Mutex<Option<SceneError>>,
     materials: Vec<MaterialDesc>,
     /// Which tile a triangle block lies in ([`Scene::tile_of_unit`]): made at the first
@@ -314,6 +297,7 @@ impl Scene {
             path: path.to_path_buf(),
             tile_state: (0..header.tile_count).map(|_| AtomicU8::new(TILE_UNCHECKED)).collect(),
             tiles_ok: AtomicU32::new(0),
+            lod_stops: OnceLock::new(),
             first_error: Mutex::new(None),
             materials,
             header,

@@ -162,21 +162,26 @@ pub struct LodHit {
 
 impl<'s> Tracer<'s> {
     /// This tracer choosing levels of detail with an error of `pixels` footprints (0: full
-    /// detail, the default). An unpaged tracer then stops at every tile crossing (its fastest
-    /// kernels follow links without stopping, and would trace full detail).
+    /// detail, the default). An unpaged tracer then stops where a link enters the root tile
+    /// of a part with levels (every tile checked: [`Scene::checked_but_lod_roots`]), or at
+    /// every tile crossing before then (its fastest kernels follow links without stopping,
+    /// and would trace full detail).
     pub fn with_lod_error(self, pixels: f32) -> Tracer<'s> {
         let has_lod = self.scene.header().lod_part_count > 0;
+        let stops = self.pager.is_some() || (has_lod && pixels > 0.0);
         let mut t = if self.pager.is_none() && has_lod && pixels > 0.0 {
-            // Kernels that check tiles, and no tile counted as checked (every crossing returns
-            // to the driver, `Tracer::enter`); the instance layer (its trees) kept.
+            // Kernels that check tiles, counting as checked those where no level is chosen
+            // (crossings into the others return to the driver, `Tracer::lod_entry` and
+            // `Tracer::enter`); the instance layer (its trees) kept.
             let fresh = Tracer::bare(self.scene, Kernels { tile_checks: true, ..self.choice });
-            Tracer { checked: megaray_scene::CheckedTiles::NONE, layer: self.layer, bounds: self.bounds, ..fresh }
+            let checked = self.scene.checked_but_lod_roots().unwrap_or(megaray_scene::CheckedTiles::NONE);
+            Tracer { checked, layer: self.layer, bounds: self.bounds, ..fresh }
         } else {
             self
         };
-        // Levels are chosen only where every crossing stops in the driver (paged, or made so
+        // Levels are chosen only where a part's entry stops in the driver (paged, or made so
         // above); a tracer that crosses tiles inline traces full detail.
-        if has_lod && t.checked.is_none() {
+        if has_lod && stops {
             t.lod = lod_levels(t.scene).into();
         }
         let t = t.rebase();

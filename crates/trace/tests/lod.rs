@@ -56,6 +56,43 @@ fn an_error_of_zero_traces_full_detail_and_a_large_one_stand_ins() {
     }
 }
 
+/// With every tile checked, an unpaged tracer with levels of detail stops only where links
+/// enter the root tiles of parts with levels (`Scene::checked_but_lod_roots`), and follows
+/// every other link inline: the same answers, closest and any hit, as a tracer that stops at
+/// every crossing (a scene whose tiles are checked as rays enter them).
+#[test]
+fn stopping_only_at_part_roots_gives_the_answers_of_stopping_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = plant(dir.path());
+    let everywhere = Scene::open(&path).unwrap();
+    let at_roots = Scene::open(&path).unwrap();
+    assert!(at_roots.check_all_tiles());
+    assert!(everywhere.checked_but_lod_roots().is_none());
+    let view_of = at_roots.checked_but_lod_roots().expect("every tile checked");
+    let stops = (0..at_roots.header().tile_count).filter(|&t| !view_of.get(t)).count();
+    assert!(stops >= 2 && stops < at_roots.header().tile_count as usize, "{stops} tiles to stop at");
+    let b = at_roots.header().bounds;
+    let lods = [0.5, 2.0, 200.0];
+    // Made before any ray: the tracers over `everywhere` see no tile checked yet.
+    let slow: Vec<Tracer> = lods.iter().map(|&l| Tracer::new(&everywhere).with_lod_error(l)).collect();
+    let fast: Vec<Tracer> = lods.iter().map(|&l| Tracer::new(&at_roots).with_lod_error(l)).collect();
+    let full = at_roots.full_part_count();
+    let mut from_lod = 0;
+    for off in [Vec3::new(0.2, 0.35, 0.9), CLOSE_OFFSET, Vec3::new(-0.3, 0.1, 2.5)] {
+        let cam = Camera::framing(&b, off, 96, 72);
+        for (a, f) in slow.iter().zip(&fast) {
+            let key = |h: megaray_trace::Hit| (h.t.to_bits(), h.part * 1_000_003 + h.prim);
+            let want = view(&cam, |r, c| a.trace_cone(r, false, c).map(key));
+            let got = view(&cam, |r, c| f.trace_cone(r, false, c).map(key));
+            assert_eq!(got, want, "closest hits differ (offset {off}, error {})", a.lod_error());
+            let any = |t: &Tracer| view(&cam, |r, c| t.trace_cone(r, true, c).map(|_| (0, 0)));
+            assert_eq!(any(f), any(a), "any hits differ (offset {off}, error {})", a.lod_error());
+            from_lod += got.iter().flatten().filter(|h| h.1 / 1_000_003 >= full).count();
+        }
+    }
+    assert!(from_lod > 500, "{from_lod} hits came from levels of detail");
+}
+
 #[test]
 fn stand_ins_answer_at_once_and_frames_converge_to_the_exact_answers() {
     let dir = tempfile::tempdir().unwrap();
