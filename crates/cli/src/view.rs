@@ -230,6 +230,10 @@ fn window<'t>(
         .map_err(|e| {
             anyhow::anyhow!("cannot open a window ({e}); is DISPLAY set? (megaray serve shows the view in a browser)")
         })?;
+    // minifb sleeps in each update until 4 ms have passed since the last; the loop updates
+    // twice a frame (input, then the picture), so that would cost each frame up to 4 ms. The
+    // loop paces itself (it sleeps when there is nothing to render).
+    win.set_target_fps(0);
     let mut view = with_source(ViewCore::new(tracer, pool, opts), source);
     let stem = name.trim_end_matches(".mray").to_string();
     let mut mouse = Mouse::default();
