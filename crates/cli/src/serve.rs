@@ -168,9 +168,10 @@ impl Server<'_, '_> {
         let config = WebSocketConfig::default().max_message_size(Some(MAX_MESSAGE)).max_frame_size(Some(MAX_MESSAGE));
         let replay = Replayed { head: Cursor::new(head), stream };
         let mut ws = tungstenite::accept_with_config(replay, Some(config)).context("WebSocket handshake failed")?;
-        // Reads wait 15 ms when there is nothing to render or send, else they only look.
-        let (wait, look) = (Duration::from_millis(15), Duration::from_micros(1));
-        ws.get_mut().stream.set_read_timeout(Some(wait))?;
+        // Reads wait 15 ms when there is nothing to render or send, else they only look: the
+        // socket is then non-blocking (a read timeout of a microsecond would wait a whole
+        // kernel tick, about 4 ms, on every look). Sends happen blocking (`blocking`).
+        ws.get_mut().stream.set_read_timeout(Some(Duration::from_millis(15)))?;
         let mut waiting = true;
         let mut busy = true; // the last step rendered a frame
         let mut view: Option<ViewCore> = None;
@@ -188,7 +189,7 @@ impl Server<'_, '_> {
             // Every message waiting, then a frame.
             let wait_now = view.is_none() || (!busy && !fresh) || unacked >= MAX_UNACKED;
             if wait_now != waiting {
-                ws.get_mut().stream.set_read_timeout(Some(if wait_now { wait } else { look }))?;
+                ws.get_mut().stream.set_nonblocking(!wait_now)?;
                 waiting = wait_now;
             }
             loop {
@@ -204,7 +205,7 @@ impl Server<'_, '_> {
                 };
                 if waiting {
                     // Something came: read on without waiting.
-                    ws.get_mut().stream.set_read_timeout(Some(look))?;
+                    ws.get_mut().stream.set_nonblocking(true)?;
                     waiting = false;
                 }
                 let input = match msg {
@@ -222,6 +223,7 @@ impl Server<'_, '_> {
                         Some(v) => v.handle(Event::Resize(w, h)),
                         None => {
                             view = Some(self.view(w, h)?);
+                            blocking(&mut ws, &mut waiting)?;
                             ws.send(Message::text(self.parts_message()))?;
                         }
                     },
@@ -241,6 +243,7 @@ impl Server<'_, '_> {
                         let Some(v) = &mut view else { continue };
                         v.handle(ev);
                         if ev == Event::Key(Key::Screenshot, true) {
+                            blocking(&mut ws, &mut waiting)?;
                             ws.send(Message::text(json!({"kind": "screenshot"}).to_string()))?;
                             ws.send(Message::Binary(png(v)?.into()))?;
                         }
@@ -295,6 +298,7 @@ impl Server<'_, '_> {
                     "pitch": v.pose().pitch, "pick": v.pick_lines(), "client": client,
                     "view": current.unwrap_or(Value::Null),
                 });
+                blocking(&mut ws, &mut waiting)?;
                 ws.send(Message::text(stats.to_string()))?;
                 ws.send(Message::Binary(jpeg(v)?.into()))?;
                 unacked += 1;
@@ -349,6 +353,16 @@ impl Write for Replayed {
     fn flush(&mut self) -> std::io::Result<()> {
         self.stream.flush()
     }
+}
+
+/// The socket made blocking (for a send: a non-blocking one could fail a frame halfway with
+/// `WouldBlock`), its reads waiting again (`waiting`).
+fn blocking(ws: &mut tungstenite::WebSocket<Replayed>, waiting: &mut bool) -> std::io::Result<()> {
+    if !*waiting {
+        ws.get_mut().stream.set_nonblocking(false)?;
+        *waiting = true;
+    }
+    Ok(())
 }
 
 /// The request head, through its blank line; longer than [`MAX_HEAD`] is an error.
