@@ -143,6 +143,16 @@ impl Accumulator {
         (self.width, self.height) = (w, h);
     }
 
+    /// Forgets the samples of the pixels marked in `pixels` (row-major; as if no frame had
+    /// finished them yet): adaptive sampling restarts the pixels it chooses.
+    pub fn restart(&mut self, pixels: &[bool]) {
+        for (i, _) in pixels.iter().enumerate().filter(|(_, &p)| p) {
+            if i < self.sum.len() {
+                (self.sum[i], self.lum_sq[i], self.counts[i], self.provisional[i]) = ([0.0; 3], 0.0, 0, false);
+            }
+        }
+    }
+
     /// Frames added since the last reset.
     pub fn frames(&self) -> u32 {
         self.frames
@@ -437,6 +447,12 @@ pub fn render_progressive_with<E>(
     };
     while acc.frames() < max_frames {
         add(acc.frames(), &mut acc)?;
+        let last = acc.frames() >= max_frames || stop.time.is_some_and(|t| start.elapsed() >= t);
+        if r.settings.adaptive > 1 && crate::adaptive::updates_after(acc.frames()) && !last {
+            // Pixels newly chosen start again at the next frame (`adaptive`).
+            let newly = r.sample_more(&acc.image());
+            acc.restart(&newly);
+        }
         governor.after_frame(tracer);
         on_frame(&acc);
         if stop.time.is_some_and(|t| start.elapsed() >= t) {

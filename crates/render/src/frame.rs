@@ -50,6 +50,9 @@ pub struct Renderer {
     /// Frames run so far: the frame loop walks the pixels forward on even passes and
     /// backward on odd ones (see [`render_frame_with`]).
     passes: AtomicU32,
+    /// The pixels that take more samples (`settings.adaptive`), chosen between frames by
+    /// the progressive loop ([`Renderer::sample_more`]).
+    more: std::sync::OnceLock<crate::adaptive::PixelSamples>,
 }
 
 impl std::ops::Deref for Renderer {
@@ -75,7 +78,12 @@ impl Renderer {
     /// A renderer for a scene with bounds `bounds`, shading with `settings.shader`, with the
     /// constant sky `settings.sky` as its (implicit) environment.
     pub fn new(settings: RenderSettings, bounds: &Aabb) -> Renderer {
-        Renderer { shader: Arc::new(settings.shader), world: World::new(settings, bounds), passes: AtomicU32::new(0) }
+        Renderer {
+            shader: Arc::new(settings.shader),
+            world: World::new(settings, bounds),
+            passes: AtomicU32::new(0),
+            more: Default::default(),
+        }
     }
 
     /// Lights the scene with `env` (what misses see, and the lights of every shader).
@@ -202,6 +210,43 @@ impl Renderer {
         Ok(out)
     }
 
+    /// The samples pixel (`px`, `py`) takes a frame: `settings.spp`, or more where adaptive
+    /// sampling chose it (`more`: the choice, read once per frame or job).
+    #[inline]
+    pub(crate) fn spp_at(&self, px: u32, py: u32, more: Option<&crate::adaptive::PixelSamples>) -> u32 {
+        let c = &self.settings.camera;
+        more.and_then(|m| m.get(px, py, c.width, c.height)).unwrap_or(self.settings.spp.max(1))
+    }
+
+    /// Adaptive sampling (`settings.adaptive` above 1): chooses the pixels of `img` (the
+    /// picture so far) that change sharply between neighbours to take that many samples a
+    /// frame from now on (the choice only grows; it belongs to the first size it is made
+    /// for). Returns the pixels chosen now that were not before (empty when off).
+    pub fn sample_more(&self, img: &crate::Image) -> Vec<bool> {
+        let n = self.settings.adaptive.min(255) as u8;
+        if n <= 1 {
+            return Vec::new();
+        }
+        let chosen = crate::adaptive::sharp_pixels(img);
+        let more = self.more.get_or_init(|| crate::adaptive::PixelSamples::new(img.width, img.height));
+        more.choose(&chosen, n)
+    }
+
+    /// How many pixels adaptive sampling has chosen so far.
+    pub fn sampled_more(&self) -> usize {
+        self.more().map_or(0, |m| m.count())
+    }
+
+    /// The adaptive choice (`None` when off or not made yet).
+    #[inline]
+    pub(crate) fn more(&self) -> Option<&crate::adaptive::PixelSamples> {
+        if self.settings.adaptive > 1 {
+            self.more.get()
+        } else {
+            None
+        }
+    }
+
     /// The `spp` samples of pixel (`px`, `py`) in frame `frame` (sample indices
     /// `frame * spp .. (frame + 1) * spp`), averaged. Depth is the nearest of the samples'.
     pub fn pixel(&self, px: u32, py: u32, frame: u32, caster: &mut dyn RayCaster) -> Result<SampleOut, Suspended> {
@@ -217,7 +262,7 @@ impl Renderer {
         frame: u32,
         f: &mut Filtered<'_, C>,
     ) -> Result<SampleOut, Suspended> {
-        let spp = self.settings.spp.max(1);
+        let spp = self.spp_at(px, py, self.more());
         let mut acc = SampleOut { depth: f32::INFINITY, ..SampleOut::default() };
         for k in 0..spp {
             let s = self.sample_in(px, py, frame.wrapping_mul(spp).wrapping_add(k), f)?;

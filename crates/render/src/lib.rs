@@ -61,6 +61,7 @@
 #![warn(missing_docs)]
 
 mod accum;
+mod adaptive;
 mod denoise;
 mod env;
 mod env_sample;

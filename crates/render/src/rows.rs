@@ -112,8 +112,12 @@ impl Renderer {
             (Some(rays), Some(b)) => rays.entering(&b),
             _ => u16::MAX,
         };
+        // Pixels that adaptive sampling chose take all their samples in `pixel_in`.
+        let more = self.more();
         for k in 0..len {
-            if entering & (1 << k) == 0 {
+            let x = g.x0 + g.step * k as u32;
+            let one = rays.is_some() && (more.is_none() || self.spp_at(x, g.y, more) == 1);
+            if one && entering & (1 << k) == 0 {
                 out.rgb[k] = self.background(rays.as_ref().map_or(Vec3::ZERO, |r| r.ray(k).dir)).to_array();
                 out.rays += 1;
                 continue;
@@ -127,10 +131,9 @@ impl Renderer {
                 continue;
             }
             let mark = caster.mark();
-            let x = g.x0 + g.step * k as u32;
             let s = match &rays {
-                Some(rays) => self.camera_sample(x, g.y, frame, &rays.ray(k), caster)?,
-                None => self.pixel_in(x, g.y, frame, caster)?,
+                Some(rays) if one => self.camera_sample(x, g.y, frame, &rays.ray(k), caster)?,
+                _ => self.pixel_in(x, g.y, frame, caster)?,
             };
             let rgb = s.radiance.to_array();
             let approx = caster.take_approx();

@@ -21,6 +21,10 @@ pub struct RenderSettings {
     /// Samples per pixel per frame: sample `i` of a pixel sits at [`pixel_offset`](crate::pixel_offset)`(i)`, so 1
     /// sample is the pixel centre in the first frame.
     pub spp: u32,
+    /// Adaptive sampling in progressive runs ([`crate::render_progressive`]): from the
+    /// second frame on, pixels where the picture changes sharply take this many samples a
+    /// frame (at most 255; 0 or 1: off).
+    pub adaptive: u32,
     /// Radiance of the sky where rays miss, when there is no environment map; also the
     /// constant environment of the `env` shader then.
     pub sky: [f32; 3],
@@ -66,6 +70,7 @@ impl RenderSettings {
             camera,
             light: default_light(),
             spp: 1,
+            adaptive: 0,
             sky: [0.55, 0.7, 0.9],
             ambient: 0.12,
             eps_scale: 1e-4,

@@ -62,3 +62,44 @@ fn error_falls_as_one_over_sqrt_frames() {
     acc.add_frame(&render_frame(&r, &tracer, 0));
     assert_eq!(acc.image(), run(1).image());
 }
+
+/// Adaptive sampling (`settings.adaptive`) chooses the pixels where the picture changes
+/// sharply between neighbours (outlines, shadow edges, and here, under two light samples, much
+/// of the noisy floor after one frame), not all, and with it a progressive run converges
+/// faster to the same picture.
+#[test]
+fn adaptive_sampling_takes_more_samples_at_edges_and_converges_faster_to_the_same_picture() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut obj = Obj::default();
+    obj.quad([
+        Vec3::new(-4.0, 0.0, -4.0),
+        Vec3::new(-4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, -4.0),
+    ]);
+    obj.sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, 12, true);
+    obj.sphere(Vec3::new(1.8, 0.5, 1.0), 0.5, 8, false);
+    let path = obj.build(dir.path(), "balls", None);
+    let scene = Scene::open(&path).unwrap();
+    let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, 48, 48);
+    let env = Arc::new(Environment::new(SkySpec { width: 64, ..SkySpec::default() }.map(), 1024, 16));
+    let renderer = |adaptive| {
+        let mut s = RenderSettings::new(cam);
+        (s.shader, s.light_samples, s.adaptive) = (Builtin::Env, 2, adaptive);
+        Renderer::new(s, &scene.header().bounds).with_environment(env.clone())
+    };
+    let tracer = Tracer::new(&scene);
+    let run = |r: &Renderer, frames| render_progressive(r, &tracer, Stop { frames: Some(frames), time: None }, |_| {});
+    let reference = run(&renderer(0), 2048).image();
+    let plain = run(&renderer(0), 16).image().relative_rmse(&reference);
+    let adaptive = renderer(16);
+    let more = run(&adaptive, 16).image().relative_rmse(&reference);
+    let chosen = adaptive.sampled_more();
+    assert!((48..=48 * 48 * 9 / 10).contains(&chosen), "{chosen} of {} pixels chosen", 48 * 48);
+    assert!(more < 0.75 * plain, "after 16 frames: {more} adaptive against {plain} without");
+    // Unbiased: many frames later, the same picture as without.
+    let late = run(&renderer(16), 512).image().relative_rmse(&reference);
+    assert!(late < 0.6 * plain && late < 0.03, "after 512 frames {late} (16 frames without: {plain})");
+    // Off (0 or 1), the frames are those of before, bit for bit.
+    assert_eq!(run(&renderer(1), 3).image(), run(&renderer(0), 3).image());
+}
