@@ -214,8 +214,8 @@ impl Renderer {
     /// sampling chose it (`more`: the choice, read once per frame or job).
     #[inline]
     pub(crate) fn spp_at(&self, px: u32, py: u32, more: Option<&crate::adaptive::PixelSamples>) -> u32 {
-        let c = &self.settings.camera;
-        more.and_then(|m| m.get(px, py, c.width, c.height)).unwrap_or(self.settings.spp.max(1))
+        let (c, spp) = (&self.settings.camera, self.settings.spp.max(1));
+        more.and_then(|m| m.get(px, py, c.width, c.height)).map_or(spp, |n| n.max(spp))
     }
 
     /// Adaptive sampling (`settings.adaptive` above 1): chooses the pixels of `img` (the

@@ -9,7 +9,6 @@
 //! [`Camera::rays16`]: megaray_base::Camera::rays16
 //! [`Camera::ray`]: megaray_base::Camera::ray
 
-use megaray_base::Vec3;
 use megaray_trace::{RayCaster, Suspended};
 
 use crate::frame::{Renderer, TILE};
@@ -116,9 +115,9 @@ impl Renderer {
         let more = self.more();
         for k in 0..len {
             let x = g.x0 + g.step * k as u32;
-            let one = rays.is_some() && (more.is_none() || self.spp_at(x, g.y, more) == 1);
-            if one && entering & (1 << k) == 0 {
-                out.rgb[k] = self.background(rays.as_ref().map_or(Vec3::ZERO, |r| r.ray(k).dir)).to_array();
+            let single = rays.is_some() && (more.is_none() || self.spp_at(x, g.y, more) == 1);
+            if let (true, Some(r)) = (single && entering & (1 << k) == 0, &rays) {
+                out.rgb[k] = self.background(r.ray(k).dir).to_array();
                 out.rays += 1;
                 continue;
             }
@@ -132,7 +131,7 @@ impl Renderer {
             }
             let mark = caster.mark();
             let s = match &rays {
-                Some(rays) if one => self.camera_sample(x, g.y, frame, &rays.ray(k), caster)?,
+                Some(rays) if single => self.camera_sample(x, g.y, frame, &rays.ray(k), caster)?,
                 _ => self.pixel_in(x, g.y, frame, caster)?,
             };
             let rgb = s.radiance.to_array();
