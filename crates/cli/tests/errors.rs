@@ -82,6 +82,7 @@ fn bad_arguments_and_outputs() {
     assert_eq!(code, 2, "clap rejects a bad resolution: {err}");
     assert!(err.contains("0x10"));
     fails(&["render", s, "-o", "a.png", "--eye", "0,0,0", "--at", "0,0,0"], &["camera"]);
+    fails(&["render", s, "-o", "a.png", "--res", "16x16", "--adaptive", "300"], &["--adaptive", "255"]);
     fails(&["build", &model("spot.obj").to_string_lossy(), "-o", "q.mray", "--build-mem", "1M"], &["too small"]);
     // A failed build leaves no output and no temporary files.
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
