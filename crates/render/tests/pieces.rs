@@ -5,7 +5,6 @@ mod common;
 
 use std::sync::Arc;
 
-use common::Obj;
 use megaray_base::Vec3;
 use megaray_page::{Pager, PagerOptions};
 use megaray_render::*;
@@ -15,16 +14,7 @@ use megaray_trace::Tracer;
 #[test]
 fn pieces_put_together_equal_the_whole_frame() {
     let dir = tempfile::tempdir().unwrap();
-    let mut obj = Obj::default();
-    obj.quad([
-        Vec3::new(-4.0, 0.0, -4.0),
-        Vec3::new(-4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, -4.0),
-    ]);
-    obj.sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, 48, true);
-    obj.sphere(Vec3::new(1.8, 0.5, 1.0), 0.5, 16, false);
-    let path = obj.build(dir.path(), "balls", None);
+    let path = common::balls(dir.path(), 48, 16);
     let scene = Scene::open(&path).unwrap();
     // Not a multiple of the tile edge, so that edge tiles are cut.
     let (w, h) = (75, 41);

@@ -5,7 +5,6 @@ mod common;
 
 use std::sync::Arc;
 
-use common::Obj;
 use megaray_base::Vec3;
 use megaray_render::*;
 use megaray_scene::Scene;
@@ -14,16 +13,7 @@ use megaray_trace::Tracer;
 #[test]
 fn error_falls_as_one_over_sqrt_frames() {
     let dir = tempfile::tempdir().unwrap();
-    let mut obj = Obj::default();
-    obj.quad([
-        Vec3::new(-4.0, 0.0, -4.0),
-        Vec3::new(-4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, -4.0),
-    ]);
-    obj.sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, 12, true);
-    obj.sphere(Vec3::new(1.8, 0.5, 1.0), 0.5, 8, false);
-    let path = obj.build(dir.path(), "balls", None);
+    let path = common::balls(dir.path(), 12, 8);
     let scene = Scene::open(&path).unwrap();
     let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, 32, 32);
     let mut s = RenderSettings::new(cam);
@@ -70,16 +60,7 @@ fn error_falls_as_one_over_sqrt_frames() {
 #[test]
 fn adaptive_sampling_takes_more_samples_at_edges_and_converges_faster_to_the_same_picture() {
     let dir = tempfile::tempdir().unwrap();
-    let mut obj = Obj::default();
-    obj.quad([
-        Vec3::new(-4.0, 0.0, -4.0),
-        Vec3::new(-4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, 4.0),
-        Vec3::new(4.0, 0.0, -4.0),
-    ]);
-    obj.sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, 12, true);
-    obj.sphere(Vec3::new(1.8, 0.5, 1.0), 0.5, 8, false);
-    let path = obj.build(dir.path(), "balls", None);
+    let path = common::balls(dir.path(), 12, 8);
     let scene = Scene::open(&path).unwrap();
     let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, 48, 48);
     let env = Arc::new(Environment::new(SkySpec { width: 64, ..SkySpec::default() }.map(), 1024, 16));

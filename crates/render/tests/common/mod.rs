@@ -16,6 +16,21 @@ pub struct Obj {
     normals: usize,
 }
 
+/// The balls scene, built in `dir`: a floor 8 units square, a smooth sphere of radius 1 on
+/// it (`bands` bands) and a faceted one of radius 0.5 (`small_bands`) beside it.
+pub fn balls(dir: &Path, bands: u32, small_bands: u32) -> PathBuf {
+    let mut obj = Obj::default();
+    obj.quad([
+        Vec3::new(-4.0, 0.0, -4.0),
+        Vec3::new(-4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, 4.0),
+        Vec3::new(4.0, 0.0, -4.0),
+    ]);
+    obj.sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, bands, true);
+    obj.sphere(Vec3::new(1.8, 0.5, 1.0), 0.5, small_bands, false);
+    obj.build(dir, "balls", None)
+}
+
 impl Obj {
     pub fn material(&mut self, name: &str) {
         writeln!(self.text, "usemtl {name}").unwrap();
