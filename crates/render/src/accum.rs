@@ -83,28 +83,8 @@ fn add_plain(sum: &mut [[f64; 3]], lum_sq: &mut [f64], counts: &mut [u32], px: &
             lum_sq[j] += l * l;
         }
     }
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx2")]
-    fn wide512(sum: &mut [[f64; 3]], lum_sq: &mut [f64], counts: &mut [u32], px: &[[f32; 3]]) {
-        body(sum, lum_sq, counts, px)
-    }
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn wide2(sum: &mut [[f64; 3]], lum_sq: &mut [f64], counts: &mut [u32], px: &[[f32; 3]]) {
-        body(sum, lum_sq, counts, px)
-    }
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F and AVX2 (tested just now); safe Rust compiled for them.
-            return unsafe { wide512(sum, lum_sq, counts, px) };
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (tested just now), as above.
-            return unsafe { wide2(sum, lum_sq, counts, px) };
-        }
-    }
-    body(sum, lum_sq, counts, px)
+    megaray_base::compiled_for!(wide512, wide2, fn body(sum: &mut [[f64; 3]], lum_sq: &mut [f64], counts: &mut [u32], px: &[[f32; 3]]));
+    megaray_base::dispatch!(body(sum, lum_sq, counts, px), wide512, wide2)
 }
 
 impl Accumulator {
