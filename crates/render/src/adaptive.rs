@@ -81,11 +81,7 @@ impl PixelSamples {
         if self.n.len() != chosen.len() {
             return Vec::new();
         }
-        self.n
-            .iter()
-            .zip(chosen)
-            .map(|(s, &c)| c && s.swap(if c { n } else { s.load(Relaxed) }, Relaxed) == 0)
-            .collect()
+        self.n.iter().zip(chosen).map(|(s, &c)| c && s.swap(n, Relaxed) == 0).collect()
     }
 
     /// How many pixels are chosen.
