@@ -118,6 +118,17 @@ fn settings_json(p: &megaray_import::pbrt::PbrtScene) -> String {
     if let Some((dir, l)) = &p.sun {
         m.insert("sun".into(), json!({"dir": v(*dir), "radiance": l}));
     }
+    if !p.area_lights.is_empty() {
+        let lights: Vec<Value> = p
+            .area_lights
+            .iter()
+            .map(|a| {
+                let tris: Vec<Value> = a.triangles.iter().map(|t| json!(t.concat())).collect();
+                json!({"material": a.material, "radiance": a.radiance, "two_sided": a.two_sided, "triangles": tris})
+            })
+            .collect();
+        m.insert("area_lights".into(), Value::Array(lights));
+    }
     Value::Object(m).to_string()
 }
 

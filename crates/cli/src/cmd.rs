@@ -623,9 +623,17 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         settings.visibility = Some(std::sync::Arc::new(vp.shown.clone())).filter(|v| !v.is_empty());
         settings.highlight = vp.highlight;
     }
+    // The scene's area lights; a source lit by them alone (no map, no sun) has a black sky.
+    let area = if viewpoint.is_some() { None } else { crate::open::scene_area_lights(&scene, &opened.path)? };
+    if area.is_some() && map.is_none() && own_lights.1.is_none() {
+        settings.sky = [0.0; 3];
+    }
     let pool = pool(a.threads)?;
     let t = Instant::now();
     let mut renderer = Renderer::new(settings, &b);
+    if let Some(area) = &area {
+        renderer = renderer.with_area_lights(area.clone());
+    }
     let env = map.map(|mut map| {
         map.rotate = a.env_rotate.to_radians();
         map.scale *= a.env_scale;

@@ -159,6 +159,44 @@ pub(crate) fn scene_camera(scene: &megaray_scene::Scene, w: u32, h: u32) -> Opti
     Some(megaray_base::Camera::look_at(vec3(c.get("eye")?)?, vec3(c.get("at")?)?, vec3(c.get("up")?)?, vfov, w, h))
 }
 
+/// The area lights the scene's source gave (a pbrt scene's `AreaLightSource`), if any; an
+/// error names the scene file and what is wrong with its list.
+pub(crate) fn scene_area_lights(
+    scene: &megaray_scene::Scene,
+    path: &Path,
+) -> anyhow::Result<Option<std::sync::Arc<megaray_render::AreaLights>>> {
+    let Some(list) = settings(scene).and_then(|v| v.get("area_lights").cloned()) else { return Ok(None) };
+    let bad = |i: usize, what: &str| anyhow::anyhow!("{}: area light {i} of the settings: {what}", path.display());
+    let list = list.as_array().ok_or_else(|| bad(0, "not a list"))?;
+    let mut lights = Vec::with_capacity(list.len());
+    let mut count = 0usize;
+    for (i, l) in list.iter().enumerate() {
+        let material = l.get("material").and_then(|m| m.as_u64()).ok_or_else(|| bad(i, "no material"))?;
+        if material >= scene.materials().len() as u64 {
+            return Err(bad(i, &format!("material {material} is not in the table ({})", scene.materials().len())));
+        }
+        let radiance = l.get("radiance").and_then(vec3).ok_or_else(|| bad(i, "no radiance"))?;
+        let two_sided = l.get("two_sided").and_then(|b| b.as_bool()).unwrap_or(false);
+        let tris = l.get("triangles").and_then(|t| t.as_array()).ok_or_else(|| bad(i, "no triangles"))?;
+        count += tris.len();
+        if count > megaray_import::pbrt::MAX_AREA_TRIANGLES {
+            return Err(bad(i, "more area-light triangles than megaray samples"));
+        }
+        let mut triangles = Vec::with_capacity(tris.len());
+        for t in tris {
+            let v: Vec<f32> = t.as_array().map(|a| a.iter().filter_map(|x| x.as_f64()).map(|x| x as f32).collect()).unwrap_or_default();
+            if v.len() != 9 {
+                return Err(bad(i, "a triangle that is not 9 numbers"));
+            }
+            let c = |k: usize| megaray_base::Vec3::new(v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+            triangles.push([c(0), c(1), c(2)]);
+        }
+        lights.push(megaray_render::AreaLight { material: material as u32, radiance, two_sided, triangles });
+    }
+    let area = megaray_render::AreaLights::new(&lights);
+    Ok((!area.is_empty()).then(|| std::sync::Arc::new(area)))
+}
+
 /// The environment map (file, scale) and the sun's direction the scene's source gave.
 pub(crate) fn scene_lights(scene: &megaray_scene::Scene) -> (Option<(PathBuf, f32)>, Option<megaray_base::Vec3>) {
     let Some(v) = settings(scene) else { return (None, None) };

@@ -114,6 +114,71 @@ Import "part.pbrt"
 }
 
 #[test]
+fn area_lights_get_their_own_material_and_world_triangles_wound_to_emit() {
+    let dir = tempfile::tempdir().unwrap();
+    let main = write(
+        dir.path(),
+        "scene.pbrt",
+        r#"WorldBegin
+Material "diffuse" "rgb reflectance" [0.2 0.3 0.4]
+AttributeBegin
+  AreaLightSource "diffuse" "rgb L" [3 2 1] "float scale" 2
+  Translate 0 5 0
+  # Wound to face +y, its normals -y: it emits downward.
+  Shape "trianglemesh" "point3 P" [0 0 0  0 0 1  1 0 0] "normal N" [0 -1 0 0 -1 0 0 -1 0]
+  # No normals: the winding (+y) emits; two-sided light.
+  AreaLightSource "diffuse" "rgb L" [1 1 1] "bool twosided" true
+  Shape "trianglemesh" "point3 P" [0 0 0  0 0 1  1 0 0]
+AttributeEnd
+Shape "trianglemesh" "point3 P" [0 0 0  1 0 0  0 1 0]
+ObjectBegin "lamp"
+  AreaLightSource "diffuse" "rgb L" [1 1 1]
+  Shape "trianglemesh" "point3 P" [0 0 0  1 0 0  0 1 0]
+ObjectEnd
+"#,
+    );
+    let s = read_scene(&main).unwrap();
+    assert_eq!(s.area_lights.len(), 2);
+    let (a, b) = (&s.area_lights[0], &s.area_lights[1]);
+    assert_eq!((a.radiance, a.two_sided), ([6.0, 4.0, 2.0], false));
+    assert_eq!((b.radiance, b.two_sided), ([1.0, 1.0, 1.0], true));
+    // Each its own material, a copy of the shape's with a name that says so.
+    assert_eq!(s.materials.len(), 3);
+    assert_ne!(a.material, b.material);
+    assert_eq!(s.materials[a.material as usize].diffuse, Some([0.2, 0.3, 0.4]));
+    assert!(s.materials[a.material as usize].name.contains("area light"));
+    let world = &s.objects[0];
+    assert_eq!(world.shapes.iter().map(|s| s.material).collect::<Vec<_>>(), [Some(a.material), Some(b.material), Some(0)]);
+    assert!(world.shapes[0].emitting && !world.shapes[2].emitting);
+    // World space, and wound so that the front emits: down for the first, up for the second.
+    let normal = |t: &[[f32; 3]; 3]| {
+        let c = |i: usize| Vec3::from(t[i]);
+        (c(1) - c(0)).cross(c(2) - c(0)).normalize()
+    };
+    assert_eq!(a.triangles.len(), 1);
+    assert!(a.triangles[0].iter().all(|p| p[1] == 5.0));
+    assert!(close(normal(&a.triangles[0]), -Vec3::Y), "{:?}", a.triangles);
+    assert!(close(normal(&b.triangles[0]), Vec3::Y));
+    // The build winds the shape's own triangles the same way.
+    struct Tris(Vec<[[f32; 3]; 3]>);
+    impl megaray_import::TriangleSink for Tris {
+        fn triangle(&mut self, p: [[f32; 3]; 3], _: &megaray_import::TriAttr) -> Result<(), megaray_import::ImportError> {
+            self.0.push(p);
+            Ok(())
+        }
+        fn material(&mut self, _: megaray_import::Material) -> u32 {
+            0
+        }
+    }
+    let mut t = Tris(Vec::new());
+    let opts = megaray_import::ImportOptions::default();
+    megaray_import::pbrt::feed_object(world, &opts, &mut t, &megaray_base::NoProgress).unwrap();
+    assert_eq!(t.0[0], a.triangles[0]);
+    // An area light inside an object is drawn but does not emit.
+    assert_eq!(s.skipped.get("AreaLightSource inside ObjectBegin (drawn, but emits nothing)"), Some(&1));
+}
+
+#[test]
 fn malformed_scenes_give_one_line_with_file_line_and_column() {
     let dir = tempfile::tempdir().unwrap();
     let cases: &[(&str, &str, &str)] = &[

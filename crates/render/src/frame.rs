@@ -92,6 +92,12 @@ impl Renderer {
         self
     }
 
+    /// Adds the scene's area lights: every shader shows them, `path` is lit by them.
+    pub fn with_area_lights(mut self, area: Arc<crate::AreaLights>) -> Renderer {
+        self.world.set_area_lights(area);
+        self
+    }
+
     /// Shades with `shader` instead of `settings.shader`.
     pub fn with_shader(mut self, shader: Arc<dyn Shader>) -> Renderer {
         self.shader = shader;

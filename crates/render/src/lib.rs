@@ -13,6 +13,8 @@
 //!   [`Shader`], passed to [`Renderer::with_shader`] (see `examples/custom_shader.rs`).
 //! - [`Material`] (`material.rs`): vertex colours, material parameters and textures, read
 //!   from the scene's attribute arrays only for the hits whose shader asks.
+//! - [`AreaLights`] (`area.rs`): emitting triangles (a pbrt scene's area lights), shown by
+//!   every shader and sampled as lights by `path`.
 //! - [`EnvMap`], [`EnvLights`], [`Environment`] (`env.rs`): HDR environment maps (.hdr,
 //!   .exr, lat-long) turned into N importance-sampled virtual directional lights, split into
 //!   M subsets for interleaved sampling.
@@ -62,6 +64,7 @@
 
 mod accum;
 mod adaptive;
+mod area;
 mod denoise;
 mod env;
 mod env_sample;
@@ -80,6 +83,7 @@ mod sky;
 mod visibility;
 mod world;
 
+pub use area::{AreaLight, AreaLights, LightSample};
 pub use accum::{render_progressive, render_progressive_with, Accumulator, Stop};
 pub use denoise::{denoise, DenoiseInput, PASSES as DENOISE_PASSES};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
@@ -93,7 +97,7 @@ pub use megaray_base::{Camera, CLOSE_OFFSET, DEFAULT_OFFSET};
 pub use region::{render_pieces, Piece, Rect};
 pub use sampling::{light_subset, pixel_offset, Sampler};
 pub use settings::{default_light, Builtin, RenderSettings};
-pub use shader::{ShadeCtx, Shader, SurfaceHit};
+pub use shader::{Bounce, ShadeCtx, Shader, SurfaceHit};
 pub use sky::{write_env, SkySpec};
 pub use visibility::{Filtered, Section, Visibility, CAP_COLOR};
 pub use world::World;

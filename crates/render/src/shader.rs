@@ -99,6 +99,19 @@ pub struct ShadeCtx<'a> {
     subset: u32,
     depth: u32,
     rays: u32,
+    /// The density (per solid angle) of the diffuse or glossy bounce that reached the
+    /// current hit, `None` for a camera ray or a specular bounce ([`ShadeCtx::emitted`]).
+    bounce_pdf: Option<f32>,
+}
+
+/// A path's diffuse or glossy bounce ([`ShadeCtx::trace_bounce`]): how what it reaches is
+/// weighed against next-event estimation of the same light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bounce {
+    /// The weight of the environment where the bounce escapes.
+    pub env_weight: f32,
+    /// The density (per solid angle) with which the direction was drawn.
+    pub pdf: f32,
 }
 
 impl<'a> ShadeCtx<'a> {
@@ -112,7 +125,7 @@ impl<'a> ShadeCtx<'a> {
         subset: u32,
     ) -> Self {
         let cone = RayCone::camera(world.settings.camera.pixel_angle());
-        ShadeCtx { world, shader, caster, sampler, subset, cone, depth: 0, rays: 0 }
+        ShadeCtx { world, shader, caster, sampler, subset, cone, depth: 0, rays: 0, bounce_pdf: None }
     }
 
     /// The footprint of the rays fired next ([`RayCaster::intersect_cone`]).
@@ -185,19 +198,20 @@ impl<'a> ShadeCtx<'a> {
         self.trace_bounce(ray, None)
     }
 
-    /// [`ShadeCtx::trace`] for a path's bounce. Where it misses: with `env_weight` `None`, the
+    /// [`ShadeCtx::trace`] for a path's bounce. Where it misses: with `bounce` `None`, the
     /// environment as the camera sees it (a specular bounce, which no shadow ray can stand
-    /// for); with `Some(w)`, the environment's pixel in that direction ([`ShadeCtx::environment_pixel`],
-    /// the radiance light sampling integrates) times `w`, the bounce's weight in multiple
-    /// importance sampling against next-event estimation of the same light.
-    pub fn trace_bounce(&mut self, ray: &Ray, env_weight: Option<f32>) -> Result<Vec3, Suspended> {
+    /// for); with `Some(b)`, the environment's pixel in that direction ([`ShadeCtx::environment_pixel`],
+    /// the radiance light sampling integrates) times `b.env_weight`, the bounce's weight in
+    /// multiple importance sampling against next-event estimation of the same light. An area
+    /// light it hits is weighed by `b.pdf` ([`ShadeCtx::emitted`]).
+    pub fn trace_bounce(&mut self, ray: &Ray, bounce: Option<Bounce>) -> Result<Vec3, Suspended> {
         if self.depth >= self.world.settings.max_depth {
             return Ok(Vec3::ZERO);
         }
         let Some(hit) = self.intersect(ray)? else {
-            return Ok(match env_weight {
+            return Ok(match bounce {
                 None => self.background(ray.dir),
-                Some(w) if w > 0.0 => self.environment_pixel(ray.dir) * w,
+                Some(b) if b.env_weight > 0.0 => self.environment_pixel(ray.dir) * b.env_weight,
                 Some(_) => Vec3::ZERO,
             });
         };
@@ -205,10 +219,36 @@ impl<'a> ShadeCtx<'a> {
         let shader = self.shader;
         self.depth += 1;
         let before = self.enter(&hit);
+        let pdf_before = std::mem::replace(&mut self.bounce_pdf, bounce.map(|b| b.pdf));
         let c = shader.shade(ray, &sh, self);
+        self.bounce_pdf = pdf_before;
         self.leave(before);
         self.depth -= 1;
         c
+    }
+
+    /// The radiance `hit`'s surface emits toward the ray's origin if it is an area light
+    /// (0 if not, or if the ray sees its back). Reached by a path's diffuse or glossy bounce,
+    /// it is weighed against next-event estimation of the same light, which drew
+    /// `light_samples` points on the lights (the power heuristic).
+    pub fn emitted(&self, hit: &SurfaceHit) -> Vec3 {
+        let Some(area) = self.world.area_lights() else { return Vec3::ZERO };
+        let scene = self.scene();
+        let over = hit.hit.placed.and_then(|p| p.material());
+        let Some((l, two_sided)) = over.or_else(|| scene.material_index(hit.hit.part, hit.hit.prim)).and_then(|m| area.emission(m)) else {
+            return Vec3::ZERO;
+        };
+        if !hit.front && !two_sided {
+            return Vec3::ZERO;
+        }
+        match self.bounce_pdf {
+            None => l,
+            Some(pb) => {
+                let k = self.world.settings.light_samples.max(1) as f32;
+                let pl = k * area.pdf(l, two_sided, hit.hit.t, hit.ng.dot(hit.wo));
+                l * (pb * pb / (pb * pb + pl * pl))
+            }
+        }
     }
 
     /// The radiance of the environment's pixel in direction `dir` (constant over the pixel:

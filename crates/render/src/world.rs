@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use megaray_base::{Aabb, Vec3};
 
+use crate::area::AreaLights;
 use crate::env::Environment;
 use crate::material::TextureCache;
 use crate::settings::RenderSettings;
@@ -19,6 +20,7 @@ pub struct World {
     eps: f32,
     diagonal: f32,
     textures: TextureCache,
+    area: Option<Arc<AreaLights>>,
 }
 
 impl World {
@@ -33,6 +35,7 @@ impl World {
             has_env: false,
             diagonal,
             textures: TextureCache::default(),
+            area: None,
             settings,
         }
     }
@@ -41,6 +44,16 @@ impl World {
     pub(crate) fn set_environment(&mut self, env: Arc<Environment>) {
         self.env = env;
         self.has_env = true;
+    }
+
+    /// Adds the scene's area lights.
+    pub(crate) fn set_area_lights(&mut self, area: Arc<AreaLights>) {
+        self.area = (!area.is_empty()).then_some(area);
+    }
+
+    /// The scene's area lights, if it has any ([`crate::Renderer::with_area_lights`]).
+    pub fn area_lights(&self) -> Option<&AreaLights> {
+        self.area.as_deref()
     }
 
     /// The environment (the constant sky when none was given).

@@ -879,12 +879,17 @@ impl Scene {
 
     /// The material of triangle `prim` of `part`, if any.
     pub fn material(&self, part: u32, prim: u32) -> Option<&MaterialDesc> {
+        self.materials.get(self.material_index(part, prim)? as usize)
+    }
+
+    /// The index in [`Scene::materials`] of triangle `prim` of `part`'s material, if any.
+    pub fn material_index(&self, part: u32, prim: u32) -> Option<u32> {
         let p = self.parts().get(part as usize)?;
         if p.materials_off == 0 || prim as u64 >= p.slot_count {
             return None;
         }
         let id: u32 = self.attr(p.materials_off, prim);
-        self.materials.get(id as usize)
+        ((id as usize) < self.materials.len()).then_some(id)
     }
 }
 

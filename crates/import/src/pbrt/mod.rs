@@ -42,6 +42,10 @@ pub struct ShapeDesc {
     pub material: Option<u32>,
     /// Where it was declared (for messages).
     pub place: String,
+    /// An area light's shape: each triangle wound to face the side its vertex normals face,
+    /// when it has them (pbrt's rule for which side emits), so that the winding's front is
+    /// the emitting side.
+    pub emitting: bool,
 }
 
 /// The kinds of shape megaray draws.
@@ -93,9 +97,29 @@ pub struct PbrtScene {
     pub sun: Option<(Vec3, [f32; 3])>,
     /// Image size (`Film`), if given.
     pub resolution: Option<(u32, u32)>,
+    /// `AreaLightSource "diffuse"`: the emitting shapes of the world (not of objects).
+    pub area_lights: Vec<AreaLightDesc>,
     /// What was skipped, per kind ("Shape sphere": 3).
     pub skipped: BTreeMap<String, u64>,
 }
+
+/// A diffuse area light: one shape whose surface emits `radiance` (pbrt's `L` times
+/// `scale`), on the side its winding faces or on both.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AreaLightDesc {
+    /// The material of its triangles: one made for it (its shape's material's reflection),
+    /// so that a hit on it is known by the material.
+    pub material: u32,
+    /// Emitted radiance, linear RGB.
+    pub radiance: [f32; 3],
+    /// Whether both sides emit (pbrt's `twosided`).
+    pub two_sided: bool,
+    /// Its triangles in world space, wound so that the front emits.
+    pub triangles: Vec<[[f32; 3]; 3]>,
+}
+
+/// Most area-light triangles a scene may have (each is a light the renderer samples).
+pub const MAX_AREA_TRIANGLES: usize = 1 << 16;
 
 /// Graphics state: the current transform and the attributes `AttributeBegin` saves.
 #[derive(Clone)]
@@ -103,6 +127,8 @@ struct State {
     ctm: Affine,
     reverse: bool,
     material: Option<u32>,
+    /// `AreaLightSource "diffuse"`: radiance and two-sidedness of the shapes that follow.
+    area: Option<([f32; 3], bool)>,
 }
 
 struct Parser {
@@ -118,6 +144,8 @@ struct Parser {
     camera_ctm: Option<(Affine, f32)>,
     /// The files being read (for cycles of `Include`).
     open: Vec<PathBuf>,
+    /// The material made for each (shape material, area light) pair.
+    emitting_materials: HashMap<(Option<u32>, [u32; 4]), u32>,
 }
 
 /// Reads the pbrt-v4 scene `path` (and what it includes).
@@ -127,7 +155,7 @@ pub fn read_scene(path: &Path) -> Result<PbrtScene, ImportError> {
             objects: vec![ObjectDesc { name: "world".into(), ..Default::default() }],
             ..Default::default()
         },
-        state: State { ctm: Affine::IDENTITY, reverse: false, material: None },
+        state: State { ctm: Affine::IDENTITY, reverse: false, material: None, area: None },
         stack: Vec::new(),
         named_cs: HashMap::new(),
         named_materials: HashMap::new(),
@@ -136,6 +164,7 @@ pub fn read_scene(path: &Path) -> Result<PbrtScene, ImportError> {
         current: 0,
         camera_ctm: None,
         open: Vec::new(),
+        emitting_materials: HashMap::new(),
     };
     p.file(path)?;
     if let Some((ctm, fov)) = p.camera_ctm {
@@ -288,20 +317,41 @@ impl Parser {
                 self.light(&kind, &params, lx.file());
             }
             "AreaLightSource" => {
-                skip_params(lx)?;
-                self.skip("AreaLightSource".into());
+                let (kind, params) = typed(lx, loc)?;
+                self.state.area = None;
+                match (kind.as_str(), params.rgb("L")) {
+                    ("diffuse", l) => {
+                        if l.is_none() && params.get("L").is_some() {
+                            self.skip("AreaLightSource L other than rgb (emits white)".into());
+                        }
+                        let s = params.num("scale").unwrap_or(1.0) as f32;
+                        let l = l.unwrap_or([1.0; 3]).map(|c| (c * s).max(0.0));
+                        if l.iter().all(|c| c.is_finite()) && l.iter().any(|&c| c > 0.0) {
+                            self.state.area = Some((l, params.bool("twosided").unwrap_or(false)));
+                        }
+                    }
+                    _ => self.skip(format!("AreaLightSource {kind}")),
+                }
             }
             "Shape" => {
                 let (kind, params) = typed(lx, loc)?;
                 let place = format!("{}: line {}", loc.file.display(), loc.line);
                 if let Some(kind) = shapes::shape(&kind, &params, lx.file(), loc)? {
-                    let s = ShapeDesc {
+                    let mut s = ShapeDesc {
                         kind,
                         xform: ctm,
                         reverse: self.state.reverse,
                         material: self.state.material,
                         place,
+                        emitting: false,
                     };
+                    if let Some(area) = self.state.area {
+                        if self.current == 0 {
+                            self.area_light(&mut s, area, loc)?;
+                        } else {
+                            self.skip("AreaLightSource inside ObjectBegin (drawn, but emits nothing)".into());
+                        }
+                    }
                     self.scene.objects[self.current as usize].shapes.push(s);
                 } else {
                     self.skip(format!("Shape {kind}"));
@@ -339,6 +389,42 @@ impl Parser {
                 return Err(loc.err(format!("unknown statement {word}")));
             }
         }
+        Ok(())
+    }
+
+    /// Makes shape `s` (of the world) an area light: its own material, its triangles read
+    /// now into [`PbrtScene::area_lights`].
+    fn area_light(
+        &mut self,
+        s: &mut ShapeDesc,
+        (radiance, two_sided): ([f32; 3], bool),
+        loc: &Loc,
+    ) -> Result<(), ImportError> {
+        let key = (s.material, [radiance[0].to_bits(), radiance[1].to_bits(), radiance[2].to_bits(), two_sided as u32]);
+        let material = match self.emitting_materials.get(&key) {
+            Some(&m) => m,
+            None => {
+                let base = s.material.and_then(|m| self.scene.materials.get(m as usize));
+                let mut m = base.cloned().unwrap_or_else(|| Material { diffuse: Some([0.5; 3]), ..Material::default() });
+                m.name = format!("{} (area light {})", if base.is_some() { m.name.as_str() } else { "diffuse" }, self.emitting_materials.len());
+                self.scene.materials.push(m);
+                let id = (self.scene.materials.len() - 1) as u32;
+                self.emitting_materials.insert(key, id);
+                id
+            }
+        };
+        s.material = Some(material);
+        s.emitting = true;
+        let mut tris = Triangles::default();
+        let one = ObjectDesc { name: String::new(), shapes: vec![s.clone()], instances: Vec::new() };
+        feed_object(&one, &crate::ImportOptions::default(), &mut tris, &megaray_base::NoProgress)?;
+        let total: usize = self.scene.area_lights.iter().map(|a| a.triangles.len()).sum::<usize>() + tris.0.len();
+        if total > MAX_AREA_TRIANGLES {
+            return Err(loc.err(format!(
+                "more than {MAX_AREA_TRIANGLES} area-light triangles (megaray samples each as a light)"
+            )));
+        }
+        self.scene.area_lights.push(AreaLightDesc { material, radiance, two_sided, triangles: tris.0 });
         Ok(())
     }
 
@@ -403,6 +489,20 @@ impl Parser {
             }
             _ => self.skip(format!("LightSource {kind}")),
         }
+    }
+}
+
+/// Collects triangles (an area light's).
+#[derive(Default)]
+struct Triangles(Vec<[[f32; 3]; 3]>);
+
+impl crate::TriangleSink for Triangles {
+    fn triangle(&mut self, p: [[f32; 3]; 3], _: &crate::TriAttr) -> Result<(), ImportError> {
+        self.0.push(p);
+        Ok(())
+    }
+    fn material(&mut self, _: Material) -> u32 {
+        crate::NO_MATERIAL
     }
 }
 
@@ -479,8 +579,8 @@ fn typed(lx: &mut Lexer, loc: &Loc) -> Result<(String, Params), ImportError> {
 enum Value {
     Nums(Vec<f64>),
     Strs(Vec<String>),
-    /// Booleans: read (`"bool remaproughness" false`) but nothing megaray draws uses one.
-    Bools,
+    /// Booleans (`"bool twosided" true`).
+    Bools(Vec<bool>),
 }
 
 /// A parameter list: `"type name" value`, by name.
@@ -501,6 +601,12 @@ impl Params {
     pub(crate) fn values(&self, name: &str) -> Option<&[f64]> {
         match self.get(name) {
             Some((_, _, Value::Nums(v))) => Some(v),
+            _ => None,
+        }
+    }
+    fn bool(&self, name: &str) -> Option<bool> {
+        match self.get(name) {
+            Some((_, _, Value::Bools(v))) => v.first().copied(),
             _ => None,
         }
     }
@@ -556,7 +662,7 @@ fn value(lx: &mut Lexer, loc: &Loc) -> Result<Value, ImportError> {
         Ok(match t {
             Tok::Num(v) => Value::Nums(vec![v]),
             Tok::Str(s) => Value::Strs(vec![s]),
-            Tok::Ident(w) if w == "true" || w == "false" => Value::Bools,
+            Tok::Ident(w) if w == "true" || w == "false" => Value::Bools(vec![w == "true"]),
             t => return Err(l.err(format!("expected a value, found {t:?}"))),
         })
     };
@@ -565,24 +671,24 @@ fn value(lx: &mut Lexer, loc: &Loc) -> Result<Value, ImportError> {
         Some((t, l)) => return one(t, &l),
         None => return Err(loc.err("the file ends where a value was expected")),
     }
-    let (mut nums, mut strs, mut bools) = (Vec::new(), Vec::new(), 0usize);
+    let (mut nums, mut strs, mut bools) = (Vec::new(), Vec::new(), Vec::new());
     loop {
         match lx.next()? {
             Some((Tok::Close, _)) => break,
             Some((Tok::Num(v), _)) => nums.push(v),
             Some((Tok::Str(s), _)) => strs.push(s),
-            Some((Tok::Ident(w), _)) if w == "true" || w == "false" => bools += 1,
+            Some((Tok::Ident(w), _)) if w == "true" || w == "false" => bools.push(w == "true"),
             Some((t, l)) => return Err(l.err(format!("unexpected {t:?} in a list"))),
             None => return Err(loc.err("unterminated list (no ']')")),
         }
-        if nums.len() + strs.len() + bools > MAX_VALUES {
+        if nums.len() + strs.len() + bools.len() > MAX_VALUES {
             return Err(loc.err(format!("a list of more than {MAX_VALUES} values")));
         }
     }
     Ok(match (nums.is_empty(), strs.is_empty()) {
         (false, true) => Value::Nums(nums),
         (true, false) => Value::Strs(strs),
-        (true, true) if bools > 0 => Value::Bools,
+        (true, true) if !bools.is_empty() => Value::Bools(bools),
         (true, true) => Value::Nums(Vec::new()),
         _ => return Err(loc.err("a list of numbers and strings mixed")),
     })

@@ -76,7 +76,8 @@ pub fn feed_object(
         }
         let normal = s.xform.inverse().unwrap_or(Affine::IDENTITY);
         let flip = s.reverse != (s.xform.determinant() < 0.0);
-        let mut moved = Moved { sink: &mut *sink, xform: s.xform, normal, flip, material: s.material };
+        let mut moved =
+            Moved { sink: &mut *sink, xform: s.xform, normal, flip, material: s.material, orient: s.emitting };
         match &s.kind {
             ShapeKind::Mesh { p, indices, n, uv } => {
                 for t in indices.chunks_exact(3) {
@@ -123,6 +124,8 @@ struct Moved<'a> {
     normal: Affine,
     flip: bool,
     material: Option<u32>,
+    /// Wind each triangle that has vertex normals to face the side they face.
+    orient: bool,
 }
 
 impl TriangleSink for Moved<'_> {
@@ -133,7 +136,14 @@ impl TriangleSink for Moved<'_> {
         if let Some(m) = self.material {
             a.material = m;
         }
-        if self.flip {
+        let mut flip = self.flip;
+        if let (true, Some(n)) = (self.orient, a.normal) {
+            let c = |i: usize| Vec3::from(p[i]);
+            let wound = (c(1) - c(0)).cross(c(2) - c(0));
+            let n = Vec3::from(n[0]) + Vec3::from(n[1]) + Vec3::from(n[2]);
+            flip = wound.dot(n) < 0.0;
+        }
+        if flip {
             p.swap(1, 2);
             if let Some(n) = a.normal.as_mut() {
                 n.swap(1, 2);

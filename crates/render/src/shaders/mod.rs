@@ -14,7 +14,9 @@ pub use path::path;
 
 impl Shader for Builtin {
     fn shade(&self, ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
-        match self {
+        // What an area light emits, plus what every surface reflects (normals: shown alone).
+        let emitted = if *self == Builtin::Normal { Vec3::ZERO } else { ctx.emitted(hit) };
+        let reflected = match self {
             Builtin::Normal => Ok(hit.ns * 0.5 + 0.5),
             Builtin::Diffuse => diffuse(hit, ctx, ctx.material(hit).albedo),
             Builtin::Phong => phong(hit, ctx, &ctx.material(hit)),
@@ -38,7 +40,8 @@ impl Shader for Builtin {
                     diffuse(hit, ctx, m.albedo)
                 }
             }
-        }
+        }?;
+        Ok(emitted + reflected)
     }
 }
 

@@ -10,7 +10,10 @@
 //! estimated without bias), the mirror or refracted direction for mirrors and glass. A
 //! diffuse or glossy bounce that escapes sees the environment too: the two estimates of the
 //! same light are combined by multiple importance sampling (the power heuristic), a specular
-//! bounce's by itself. Russian roulette ends paths from the third surface on with probability
+//! bounce's by itself. The scene's area lights ([`crate::AreaLights`]) are sampled the same
+//! way: `light_samples` points drawn on them in proportion to power, weighed against the
+//! bounces that hit them ([`ShadeCtx::emitted`], which the built-in shaders add at every
+//! hit). Russian roulette ends paths from the third surface on with probability
 //! one minus the surface's reflectance, and `--max-depth` bounds them. Materials as the `auto`
 //! shader reads them.
 
@@ -20,7 +23,7 @@ use megaray_base::{Ray, Vec3};
 use megaray_trace::Suspended;
 
 use super::{cosine_dir, glass, mirror};
-use crate::shader::{ShadeCtx, SurfaceHit};
+use crate::shader::{Bounce, ShadeCtx, SurfaceHit};
 
 /// The radiance leaving `hit` toward the ray's origin.
 pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3, Suspended> {
@@ -65,6 +68,25 @@ pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3,
             out += f * ctx.environment_pixel(d) * (cos * mis / pl);
         }
     }
+    if let Some(area) = ctx.world().area_lights() {
+        let u0 = ctx.next_1d();
+        for j in 0..k {
+            let (v, w) = ctx.next_2d();
+            let Some(s) = area.sample(hit.p, (j as f32 + u0) / k as f32, v, w) else { continue };
+            let cos = n.dot(s.dir);
+            if cos <= 0.0 || hit.ng.dot(s.dir) <= 0.0 {
+                continue;
+            }
+            let (pl, pb) = (k as f32 * s.pdf, cos / PI);
+            let mis = pl * pl / (pl * pl + pb * pb);
+            // Stop short of the light's own surface.
+            let mut shadow = ctx.spawn(hit, s.dir);
+            shadow.t_max = (s.dist - ctx.world().eps()) * (1.0 - 1e-4);
+            if shadow.t_max > 0.0 && !ctx.occluded(&shadow)? {
+                out += brdf(s.dir) * s.radiance * (cos * mis / pl);
+            }
+        }
+    }
     // The bounce: BRDF times cosine over the cosine density (cos / pi).
     let (u1, u2) = ctx.next_2d();
     let d = cosine_dir(n, u1, u2);
@@ -82,6 +104,6 @@ pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3,
     // Where it escapes, the environment it sees, weighted against the light samples.
     let (pb, pl) = (n.dot(d).max(0.0) / PI, k as f32 * env.pdf(d));
     let mis = if pb > 0.0 { pb * pb / (pb * pb + pl * pl) } else { 0.0 };
-    out += weight * ctx.trace_bounce(&ctx.spawn(hit, d), Some(mis))?;
+    out += weight * ctx.trace_bounce(&ctx.spawn(hit, d), Some(Bounce { env_weight: mis, pdf: pb }))?;
     Ok(out)
 }
