@@ -42,6 +42,8 @@ struct Emitter {
 /// A point drawn on the lights, seen from a surface point.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LightSample {
+    /// The point drawn.
+    pub point: Vec3,
     /// Unit direction from the surface point to the light's point.
     pub dir: Vec3,
     /// Distance to the light's point.
@@ -139,7 +141,7 @@ impl AreaLights {
             return None;
         }
         let pdf = self.pdf(e.radiance, e.two_sided, dist, cos_l.abs());
-        (pdf > 0.0 && pdf.is_finite()).then_some(LightSample { dir, dist, radiance: e.radiance, pdf })
+        (pdf > 0.0 && pdf.is_finite()).then_some(LightSample { point: q, dir, dist, radiance: e.radiance, pdf })
     }
 
     /// The density (per solid angle) with which [`AreaLights::sample`] draws a point of a

@@ -79,10 +79,14 @@ pub fn path(ray: &Ray, hit: &SurfaceHit, ctx: &mut ShadeCtx<'_>) -> Result<Vec3,
             }
             let (pl, pb) = (k as f32 * s.pdf, cos / PI);
             let mis = pl * pl / (pl * pl + pb * pb);
-            // Stop short of the light's own surface.
+            // From the point moved off the surface to just short of the light's point (aimed
+            // anew: the move brings the light's plane nearer along the first direction).
             let mut shadow = ctx.spawn(hit, s.dir);
-            shadow.t_max = (s.dist - ctx.world().eps()) * (1.0 - 1e-4);
-            if shadow.t_max > 0.0 && !ctx.occluded(&shadow)? {
+            let to = s.point - shadow.org;
+            let len = to.length();
+            shadow.dir = to / len;
+            shadow.t_max = len * (1.0 - 1e-3);
+            if len > 0.0 && !ctx.occluded(&shadow)? {
                 out += brdf(s.dir) * s.radiance * (cos * mis / pl);
             }
         }
