@@ -29,6 +29,7 @@ AttributeBegin
 AttributeEnd
 "#,
     );
+    write(dir.path(), "wood.tga", "");
     let main = write(
         dir.path(),
         "scene.pbrt",
@@ -41,6 +42,8 @@ LightSource "distant" "point3 from" [0 10 0] "point3 to" [0 0 0] "rgb L" [1 0.5 
 LightSource "infinite" "string filename" "sky.exr"
 Texture "wood" "spectrum" "imagemap" "string filename" "wood.tga"
 MakeNamedMaterial "Wood" "string type" "coateddiffuse" "texture reflectance" "wood" "float roughness" 0.2
+Texture "gone" "spectrum" "imagemap" "string filename" "missing.tga"
+MakeNamedMaterial "Gone" "string type" "diffuse" "texture reflectance" "gone"
 Material "conductor" "rgb reflectance" [0.9 0.6 0.2]
 ObjectBegin "tri"
   Shape "trianglemesh" "point3 P" [0 0 0 1 0 0 0 1 0] "integer indices" [0 1 2]
@@ -99,10 +102,14 @@ Import "part.pbrt"
     assert_eq!(s.skipped.get("Shape sphere"), Some(&2));
     assert_eq!(s.skipped.get("Shape curve"), Some(&1));
     // Materials: the named coated one with its texture, the conductor current after it.
-    assert_eq!(s.materials.len(), 2);
+    assert_eq!(s.materials.len(), 3);
     assert!(s.materials[0].texture.as_ref().unwrap().ends_with("wood.tga"));
-    assert_eq!(s.materials[1].metallic, Some(1.0));
-    assert_eq!(tri.material, Some(1));
+    assert_eq!(s.materials[0].diffuse, Some([1.0; 3]), "the texture is the reflectance");
+    // A texture whose file is missing: pbrt's grey, and a note.
+    assert_eq!((s.materials[1].texture.as_ref(), s.materials[1].diffuse), (None, Some([0.5; 3])));
+    assert_eq!(s.skipped.get("Texture imagemap whose file is missing (drawn in the material's colour)"), Some(&1));
+    assert_eq!(s.materials[2].metallic, Some(1.0));
+    assert_eq!(tri.material, Some(2));
     // Camera, film, lights.
     let c = s.camera.unwrap();
     assert!(close(c.eye, Vec3::new(0.0, 0.0, -10.0)) && close(c.at, Vec3::new(0.0, 0.0, -9.0)) && c.fov == 45.0);

@@ -438,9 +438,19 @@ impl Parser {
         let mut m = Material { name, ..Material::default() };
         let rough = p.num("roughness").or(p.num("uroughness")).map(|r| r as f32);
         let tex = p.texture("reflectance").and_then(|t| self.textures.get(t).cloned());
+        // A texture that is not there: the material drawn in its colour (or pbrt's 0.5 grey).
+        let tex = match tex {
+            Some(t) if !t.is_file() => {
+                self.skip("Texture imagemap whose file is missing (drawn in the material's colour)".into());
+                None
+            }
+            t => t,
+        };
         match kind {
             "diffuse" | "coateddiffuse" | "diffusetransmission" => {
-                m.diffuse = Some(p.rgb("reflectance").unwrap_or([0.5; 3]));
+                // The texture is the reflectance (megaray multiplies it by the colour).
+                let plain = if tex.is_some() { [1.0; 3] } else { [0.5; 3] };
+                m.diffuse = Some(p.rgb("reflectance").unwrap_or(plain));
                 m.texture = tex;
                 if kind == "coateddiffuse" {
                     m.specular = Some([0.04; 3]);
