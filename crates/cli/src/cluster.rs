@@ -136,7 +136,13 @@ pub(crate) fn serve_view(
     ));
     s.shader = opts.shader;
     s.light_samples = opts.light_samples;
+    if opts.area.is_some() {
+        s.sky = [0.0; 3];
+    }
     let mut r = megaray_render::Renderer::new(s, &bounds);
+    if let Some(area) = &opts.area {
+        r = r.with_area_lights(area.clone());
+    }
     c.serve(&mut r, opts.sky.clone(), tracer, pool)?;
     Ok(())
 }
@@ -154,6 +160,7 @@ pub(crate) fn frame_source<'t>(
 pub(crate) struct FrameRequest {
     settings: megaray_render::RenderSettings,
     env: bool,
+    area: Option<std::sync::Arc<megaray_render::AreaLights>>,
     index: u32,
     reply: std::sync::mpsc::Sender<Result<megaray_render::Frame, String>>,
 }
@@ -162,7 +169,8 @@ pub(crate) struct FrameRequest {
 pub(crate) fn request_source<'t>(tx: std::sync::mpsc::Sender<FrameRequest>) -> megaray_view::FrameSource<'t> {
     Box::new(move |r, index| {
         let (reply, answer) = std::sync::mpsc::channel();
-        let req = FrameRequest { settings: r.settings.clone(), env: r.has_environment(), index, reply };
+        let area = r.world().area_lights().cloned();
+        let req = FrameRequest { settings: r.settings.clone(), env: r.has_environment(), area, index, reply };
         tx.send(req).map_err(|_| "the cluster has stopped".to_string())?;
         answer.recv().map_err(|_| "the cluster has stopped".to_string())?
     })
@@ -186,9 +194,13 @@ pub(crate) fn serve_requests(
             r.settings.shader == s.shader
                 && r.settings.light_samples == s.light_samples
                 && r.has_environment() == req.env
+                && r.world().area_lights().is_some() == req.area.is_some()
         });
         if !same {
-            let fresh = megaray_render::Renderer::new(req.settings.clone(), &bounds);
+            let mut fresh = megaray_render::Renderer::new(req.settings.clone(), &bounds);
+            if let Some(area) = &req.area {
+                fresh = fresh.with_area_lights(area.clone());
+            }
             last = Some(match (req.env, &sky) {
                 (true, Some(env)) => fresh.with_environment(env.clone()),
                 _ => fresh,

@@ -624,7 +624,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         settings.highlight = vp.highlight;
     }
     // The scene's area lights; a source lit by them alone (no map, no sun) has a black sky.
-    let area = if viewpoint.is_some() { None } else { crate::open::scene_area_lights(&scene, &opened.path)? };
+    let area = if viewpoint.is_some() { None } else { crate::open::scene_area_lights(&scene)? };
     if area.is_some() && map.is_none() && own_lights.1.is_none() {
         settings.sky = [0.0; 3];
     }

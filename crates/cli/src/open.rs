@@ -133,7 +133,9 @@ fn is_pbrt(p: &Path) -> bool {
 /// One note line per kind of thing a scene's reader skipped.
 fn note(p: &Path, scene: &megaray_import::pbrt::PbrtScene, bars: &dyn Progress) {
     for (what, n) in &scene.skipped {
-        bars.note(&format!("{}: skipped {n} x {what} (not drawn by megaray)", p.display()));
+        // A kind that says what became of it carries its own words.
+        let why = if what.ends_with(')') { "" } else { " (not drawn by megaray)" };
+        bars.note(&format!("{}: skipped {n} x {what}{why}", p.display()));
     }
 }
 
@@ -163,10 +165,10 @@ pub(crate) fn scene_camera(scene: &megaray_scene::Scene, w: u32, h: u32) -> Opti
 /// error names the scene file and what is wrong with its list.
 pub(crate) fn scene_area_lights(
     scene: &megaray_scene::Scene,
-    path: &Path,
 ) -> anyhow::Result<Option<std::sync::Arc<megaray_render::AreaLights>>> {
     let Some(list) = settings(scene).and_then(|v| v.get("area_lights").cloned()) else { return Ok(None) };
-    let bad = |i: usize, what: &str| anyhow::anyhow!("{}: area light {i} of the settings: {what}", path.display());
+    let bad =
+        |i: usize, what: &str| anyhow::anyhow!("{}: area light {i} of the settings: {what}", scene.path().display());
     let list = list.as_array().ok_or_else(|| bad(0, "not a list"))?;
     let mut lights = Vec::with_capacity(list.len());
     let mut count = 0usize;
@@ -184,7 +186,10 @@ pub(crate) fn scene_area_lights(
         }
         let mut triangles = Vec::with_capacity(tris.len());
         for t in tris {
-            let v: Vec<f32> = t.as_array().map(|a| a.iter().filter_map(|x| x.as_f64()).map(|x| x as f32).collect()).unwrap_or_default();
+            let v: Vec<f32> = t
+                .as_array()
+                .map(|a| a.iter().filter_map(|x| x.as_f64()).map(|x| x as f32).collect())
+                .unwrap_or_default();
             if v.len() != 9 {
                 return Err(bad(i, "a triangle that is not 9 numbers"));
             }

@@ -453,6 +453,7 @@ pub(crate) fn with_source<'t, 's>(view: ViewCore<'t, 's>, source: Option<FrameSo
 /// it, the `--view` to start from.
 pub(crate) fn scene_options(opts: &mut ViewOptions, a: &ViewerArgs, scene: &megaray_scene::Scene) -> Result<()> {
     scene_home(opts, scene);
+    opts.area = crate::open::scene_area_lights(scene)?;
     opts.visibility = a.show.visibility(scene.components())?;
     if let Some(p) = &a.view {
         if a.show.any() {

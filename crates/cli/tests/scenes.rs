@@ -63,6 +63,59 @@ fn a_pbrt_scene_builds_renders_from_its_camera_and_animates() {
     assert!((eye[0]).abs() < 1e-4 && (eye[1] - 3.0).abs() < 1e-4 && (eye[2] - 12.0).abs() < 1e-4, "{eye:?}");
 }
 
+/// A floor under a lamp: a pbrt area light, the scene's only light.
+const LAMP: &str = r#"LookAt 0 2 4  0 0 0  0 1 0
+Camera "perspective" "float fov" 50
+WorldBegin
+Material "diffuse" "rgb reflectance" [0.6 0.6 0.6]
+Shape "trianglemesh" "point3 P" [-3 0 -3  3 0 -3  3 0 3  -3 0 3] "integer indices" [0 2 1 0 3 2]
+AttributeBegin
+  AreaLightSource "diffuse" "rgb L" [20 20 20]
+  Material "diffuse" "rgb reflectance" [0 0 0]
+  Shape "trianglemesh" "point3 P" [-0.3 1.5 -0.3  0.3 1.5 -0.3  0.3 1.5 0.3  -0.3 1.5 0.3]
+    "integer indices" [0 1 2 0 2 3] "normal N" [0 -1 0  0 -1 0  0 -1 0  0 -1 0]
+AttributeEnd
+"#;
+
+/// An area light lights `path` (and nothing else lights the scene: the background is black),
+/// in `render` and in the viewer alike.
+#[test]
+fn a_pbrt_area_light_lights_the_path_shader_in_render_and_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_string_lossy().into_owned();
+    std::fs::write(d("lamp.pbrt"), LAMP).unwrap();
+    let (code, _, err) = run(&["build", &d("lamp.pbrt"), "-o", &d("lamp.mray"), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) =
+        run(&["render", &d("lamp.mray"), "-o", &d("r.png"), "--res", "48x32", "--shader", "path", "--frames", "16"]);
+    assert_eq!(code, 0, "{err}");
+    let img = image::open(d("r.png")).unwrap().to_rgb8();
+    let lum = |x: u32, y: u32| img.get_pixel(x, y).0.iter().map(|&c| c as u32).sum::<u32>();
+    // The corners look past the floor into the black sky; the floor below the lamp is lit,
+    // brighter near it than at the far edge.
+    assert_eq!(lum(0, 0), 0, "the background is black");
+    let (below, far, near) = (lum(24, 15), lum(24, 9), lum(24, 31));
+    assert!(below > 400 && below > far && below > near, "floor below the lamp {below}, beyond {far}, nearer {near}");
+    // The viewer (a still script: exact frames) draws the same light.
+    std::fs::write(d("script.txt"), "frames 4\n").unwrap();
+    let (code, _, err) = run(&[
+        "view",
+        &d("lamp.mray"),
+        "--script",
+        &d("script.txt"),
+        "--out",
+        &d("v"),
+        "--res",
+        "48x32",
+        "--shader",
+        "path",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let v = image::open(dir.path().join("v/frame-00004.png")).unwrap().to_rgb8();
+    let vl = |x: u32, y: u32| v.get_pixel(x, y).0.iter().map(|&c| c as u32).sum::<u32>();
+    assert!(vl(24, 15) > 400 && vl(0, 0) == 0, "the view: floor {}, corner {}", vl(24, 15), vl(0, 0));
+}
+
 #[test]
 fn a_forest_shows_trillions_of_triangles_from_a_few_objects() {
     let dir = tempfile::tempdir().unwrap();

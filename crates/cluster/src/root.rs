@@ -190,7 +190,10 @@ impl<T: Transport> Cluster<T> {
                     if r.settings.shader != shader || r.has_environment() != lit {
                         let mut s = r.settings.clone();
                         s.shader = shader;
-                        let fresh = Renderer::new(s, &tracer.scene().header().bounds);
+                        let mut fresh = Renderer::new(s, &tracer.scene().header().bounds);
+                        if let Some(area) = r.world().area_lights() {
+                            fresh = fresh.with_area_lights(area.clone());
+                        }
                         *r = match (lit, &env) {
                             (false, _) => fresh,
                             (true, Some(env)) => fresh.with_environment(env.clone()),

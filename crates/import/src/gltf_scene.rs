@@ -64,7 +64,14 @@ pub fn read_scene(path: &Path) -> Result<PbrtScene, ImportError> {
             }
             let kind = ShapeKind::Mesh { p: d.positions, indices, n: d.normals, uv: d.uvs };
             let material = p.material().index().map(|i| i as u32);
-            o.shapes.push(ShapeDesc { kind, xform: Affine::IDENTITY, reverse: false, material, place: name.clone(), emitting: false });
+            o.shapes.push(ShapeDesc {
+                kind,
+                xform: Affine::IDENTITY,
+                reverse: false,
+                material,
+                place: name.clone(),
+                emitting: false,
+            });
         }
         mesh_obj.push(s.objects.len() as u32);
         s.objects.push(o);

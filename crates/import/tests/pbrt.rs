@@ -155,7 +155,10 @@ ObjectEnd
     assert_eq!(s.materials[a.material as usize].diffuse, Some([0.2, 0.3, 0.4]));
     assert!(s.materials[a.material as usize].name.contains("area light"));
     let world = &s.objects[0];
-    assert_eq!(world.shapes.iter().map(|s| s.material).collect::<Vec<_>>(), [Some(a.material), Some(b.material), Some(0)]);
+    assert_eq!(
+        world.shapes.iter().map(|s| s.material).collect::<Vec<_>>(),
+        [Some(a.material), Some(b.material), Some(0)]
+    );
     assert!(world.shapes[0].emitting && !world.shapes[2].emitting);
     // World space, and wound so that the front emits: down for the first, up for the second.
     let normal = |t: &[[f32; 3]; 3]| {
@@ -169,7 +172,11 @@ ObjectEnd
     // The build winds the shape's own triangles the same way.
     struct Tris(Vec<[[f32; 3]; 3]>);
     impl megaray_import::TriangleSink for Tris {
-        fn triangle(&mut self, p: [[f32; 3]; 3], _: &megaray_import::TriAttr) -> Result<(), megaray_import::ImportError> {
+        fn triangle(
+            &mut self,
+            p: [[f32; 3]; 3],
+            _: &megaray_import::TriAttr,
+        ) -> Result<(), megaray_import::ImportError> {
             self.0.push(p);
             Ok(())
         }

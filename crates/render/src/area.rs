@@ -86,7 +86,14 @@ impl AreaLights {
                     continue;
                 }
                 acc += (luminance(l.radiance) * area * sides) as f64;
-                a.emitters.push(Emitter { p0: t[0], e1, e2, n: c.normalize(), radiance: l.radiance, two_sided: l.two_sided });
+                a.emitters.push(Emitter {
+                    p0: t[0],
+                    e1,
+                    e2,
+                    n: c.normalize(),
+                    radiance: l.radiance,
+                    two_sided: l.two_sided,
+                });
                 a.cdf.push(acc as f32);
             }
         }
@@ -180,7 +187,12 @@ mod tests {
     /// unit radiance) averages to a fine quadrature of it.
     #[test]
     fn sampling_integrates_the_irradiance_and_pdf_matches_the_draws() {
-        let light = AreaLight { material: 3, radiance: Vec3::new(2.0, 1.0, 0.5), two_sided: false, triangles: quad(2.0, 0.5, true) };
+        let light = AreaLight {
+            material: 3,
+            radiance: Vec3::new(2.0, 1.0, 0.5),
+            two_sided: false,
+            triangles: quad(2.0, 0.5, true),
+        };
         let lights = AreaLights::new(&[light.clone()]);
         assert_eq!(lights.triangle_count(), 2);
         assert_eq!(lights.emission(3), Some((light.radiance, false)));
@@ -224,8 +236,10 @@ mod tests {
 
     #[test]
     fn triangles_are_drawn_in_proportion_to_power() {
-        let bright = AreaLight { material: 0, radiance: Vec3::splat(3.0), two_sided: false, triangles: quad(1.0, 0.5, true) };
-        let big = AreaLight { material: 1, radiance: Vec3::splat(1.0), two_sided: false, triangles: quad(1.0, 1.0, true) };
+        let bright =
+            AreaLight { material: 0, radiance: Vec3::splat(3.0), two_sided: false, triangles: quad(1.0, 0.5, true) };
+        let big =
+            AreaLight { material: 1, radiance: Vec3::splat(1.0), two_sided: false, triangles: quad(1.0, 1.0, true) };
         let none = AreaLight { material: 2, radiance: Vec3::ZERO, two_sided: false, triangles: quad(1.0, 1.0, true) };
         let lights = AreaLights::new(&[bright, big, none]);
         assert_eq!(lights.triangle_count(), 4, "a light that emits nothing is dropped");

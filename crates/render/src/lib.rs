@@ -83,8 +83,8 @@ mod sky;
 mod visibility;
 mod world;
 
-pub use area::{AreaLight, AreaLights, LightSample};
 pub use accum::{render_progressive, render_progressive_with, Accumulator, Stop};
+pub use area::{AreaLight, AreaLights, LightSample};
 pub use denoise::{denoise, DenoiseInput, PASSES as DENOISE_PASSES};
 pub use env::{dir_from_angles, luminance, DirLight, EnvError, EnvLights, EnvMap, Environment};
 pub use env_sample::EnvSampler;

@@ -235,7 +235,9 @@ impl<'a> ShadeCtx<'a> {
         let Some(area) = self.world.area_lights() else { return Vec3::ZERO };
         let scene = self.scene();
         let over = hit.hit.placed.and_then(|p| p.material());
-        let Some((l, two_sided)) = over.or_else(|| scene.material_index(hit.hit.part, hit.hit.prim)).and_then(|m| area.emission(m)) else {
+        let Some((l, two_sided)) =
+            over.or_else(|| scene.material_index(hit.hit.part, hit.hit.prim)).and_then(|m| area.emission(m))
+        else {
             return Vec3::ZERO;
         };
         if !hit.front && !two_sided {

@@ -52,8 +52,8 @@ impl World {
     }
 
     /// The scene's area lights, if it has any ([`crate::Renderer::with_area_lights`]).
-    pub fn area_lights(&self) -> Option<&AreaLights> {
-        self.area.as_deref()
+    pub fn area_lights(&self) -> Option<&Arc<AreaLights>> {
+        self.area.as_ref()
     }
 
     /// The environment (the constant sky when none was given).

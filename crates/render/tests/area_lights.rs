@@ -92,8 +92,12 @@ fn a_floor_under_a_lamp_shows_its_irradiance() {
     obj.quad(lamp);
     let mtl = "newmtl floor\nKd 0.6 0.6 0.6\nnewmtl lamp\nKd 0 0 0\n";
     let scene = Scene::open(&obj.build(dir.path(), "lamp", Some(mtl))).unwrap();
-    let lights =
-        [AreaLight { material: material(&scene, "lamp"), radiance: Vec3::splat(l), two_sided: false, triangles: triangles(&[lamp]) }];
+    let lights = [AreaLight {
+        material: material(&scene, "lamp"),
+        radiance: Vec3::splat(l),
+        two_sided: false,
+        triangles: triangles(&[lamp]),
+    }];
     // The lamp's winding (a, b, c) faces down: the floor is lit.
     let cam = Camera::look_at(Vec3::new(0.0, 2.2, 2.0), Vec3::new(0.0, 0.3, 0.0), Vec3::Y, 60.0, 32, 32);
     let img = path_traced(&scene, cam, &lights, 256, 8).image();
@@ -102,7 +106,11 @@ fn a_floor_under_a_lamp_shows_its_irradiance() {
         let mut e = 0.0f64;
         for i in 0..n {
             for j in 0..n {
-                let q = p(-half + 2.0 * half * (i as f32 + 0.5) / n as f32, h, -half + 2.0 * half * (j as f32 + 0.5) / n as f32);
+                let q = p(
+                    -half + 2.0 * half * (i as f32 + 0.5) / n as f32,
+                    h,
+                    -half + 2.0 * half * (j as f32 + 0.5) / n as f32,
+                );
                 let d = q - x;
                 let r2 = d.length_squared();
                 e += ((d.y / r2.sqrt()).powi(2) / r2) as f64;

@@ -38,6 +38,9 @@ pub struct ViewOptions {
     /// The sky: an environment light that K turns on and off, and whether it starts on.
     pub sky: Option<Arc<Environment>>,
     pub sky_on: bool,
+    /// The scene's area lights (a pbrt scene's): every shader shows them, `path` is lit by
+    /// them, and with the sky off the background is black rather than the constant sky.
+    pub area: Option<Arc<megaray_render::AreaLights>>,
     /// The time from input to the frame that shows it. While the camera moves, frames render
     /// at the resolution that takes half of it, and end at it; still frames end at half of it
     /// (a key pressed waits for one to end). Pixels a frame's end leaves are filled from
@@ -79,6 +82,7 @@ impl ViewOptions {
             light_samples: 2,
             sky: None,
             sky_on: false,
+            area: None,
             frame_budget: Some(Duration::from_millis(100)),
             max_frames: 1024,
             denoise: true,
@@ -248,7 +252,13 @@ impl<'t, 's> ViewCore<'t, 's> {
         s.stand_in = self.opts.frame_budget.is_some();
         s.highlight = self.highlight;
         s.visibility = (!self.vis.is_empty()).then(|| Arc::new(self.vis.clone()));
-        let r = Renderer::new(s, &self.bounds);
+        if self.opts.area.is_some() {
+            s.sky = [0.0; 3];
+        }
+        let mut r = Renderer::new(s, &self.bounds);
+        if let Some(area) = &self.opts.area {
+            r = r.with_area_lights(area.clone());
+        }
         self.renderer = match (&self.opts.sky, self.sky_on) {
             (Some(env), true) => r.with_environment(env.clone()),
             _ => r,

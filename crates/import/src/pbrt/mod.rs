@@ -405,8 +405,13 @@ impl Parser {
             Some(&m) => m,
             None => {
                 let base = s.material.and_then(|m| self.scene.materials.get(m as usize));
-                let mut m = base.cloned().unwrap_or_else(|| Material { diffuse: Some([0.5; 3]), ..Material::default() });
-                m.name = format!("{} (area light {})", if base.is_some() { m.name.as_str() } else { "diffuse" }, self.emitting_materials.len());
+                let mut m =
+                    base.cloned().unwrap_or_else(|| Material { diffuse: Some([0.5; 3]), ..Material::default() });
+                m.name = format!(
+                    "{} (area light {})",
+                    if base.is_some() { m.name.as_str() } else { "diffuse" },
+                    self.emitting_materials.len()
+                );
                 self.scene.materials.push(m);
                 let id = (self.scene.materials.len() - 1) as u32;
                 self.emitting_materials.insert(key, id);
