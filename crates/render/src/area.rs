@@ -139,7 +139,7 @@ impl AreaLights {
         let q = e.p0 + e.e1 * (s * (1.0 - w)) + e.e2 * (s * w);
         let d = q - p;
         let dist = d.length();
-        if !(dist > 0.0) {
+        if dist.is_nan() || dist <= 0.0 {
             return None;
         }
         let dir = d / dist;
