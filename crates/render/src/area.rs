@@ -193,7 +193,7 @@ mod tests {
             two_sided: false,
             triangles: quad(2.0, 0.5, true),
         };
-        let lights = AreaLights::new(&[light.clone()]);
+        let lights = AreaLights::new(std::slice::from_ref(&light));
         assert_eq!(lights.triangle_count(), 2);
         assert_eq!(lights.emission(3), Some((light.radiance, false)));
         assert_eq!(lights.emission(4), None);
