@@ -448,8 +448,17 @@ def render_mitsuba(parts, camera, res, spp, radiance, out, sky_file=None):
     t = time.time()
     img = mi.render(mi.load_dict(scene))
     secs = time.time() - t
-    mi.Bitmap(img).write(out)
+    write_exr(img, out)
     return secs
+
+
+def write_exr(img, path):
+    """Writes a Mitsuba image as EXR. OpenEXR's writer waits on a thread pool that Mitsuba
+    sizes from Dr.Jit's: with the one thread the Python BSDF asks for, the write never ends."""
+    import drjit as dr
+    import mitsuba as mi
+    dr.set_thread_count(max(2, os.cpu_count() or 2))
+    mi.Bitmap(img).write(path)
 
 
 def read_exr(path):
@@ -492,7 +501,7 @@ def run_staircase(a):
         t = time.time()
         img = mi.render(mi.load_dict(staircase_mitsuba({}, a.res, a.spp)))
         mi_s = time.time() - t
-        mi.Bitmap(img).write(ref)
+        write_exr(img, ref)
         r = compare(ref, ours)
         r.update({"scene": "staircase", "res": a.res, "megaray_frames": a.frames, "megaray_s": round(ours_s, 2),
                   "mitsuba_spp": a.spp, "mitsuba_s": round(mi_s, 2)})
