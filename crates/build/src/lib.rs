@@ -30,6 +30,7 @@
 //! ```
 
 pub mod attrs;
+pub mod behind;
 pub mod bvh;
 pub mod lod;
 pub mod objects;

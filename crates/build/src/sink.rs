@@ -7,6 +7,7 @@ use megaray_import::{ImportError, Material, TriAttr, TriangleSink};
 use megaray_scene::MaterialDesc;
 
 use crate::attrs::AttrStreams;
+use crate::behind::WriteBehind;
 use crate::stream::{Ids, StreamFile, StreamTri, StreamWriter};
 use crate::{BuildError, BuildOptions};
 
@@ -28,6 +29,8 @@ pub struct BuildSink<'a> {
     input: std::path::PathBuf,
     /// Components named so far ([`TriangleSink::component`]).
     components: ComponentIds,
+    /// The thread that writes the positions streams while the reader parses.
+    wb: std::sync::Arc<WriteBehind>,
 }
 
 /// The components of an import and which triangle ids belong to each: runs of ids in import
@@ -88,8 +91,9 @@ impl ComponentIds {
 
 impl<'a> BuildSink<'a> {
     pub fn new(dir: &Path, opts: &'a BuildOptions) -> Result<BuildSink<'a>, BuildError> {
+        let wb = std::sync::Arc::new(WriteBehind::new(2));
         Ok(BuildSink {
-            stream: Self::object_stream(dir, 0, 0)?,
+            stream: Self::object_stream(dir, 0, 0, &wb)?,
             dir: dir.to_path_buf(),
             objects: 0,
             id_base: 0,
@@ -101,6 +105,7 @@ impl<'a> BuildSink<'a> {
             seen: 0,
             input: std::path::PathBuf::from("(input)"),
             components: ComponentIds::default(),
+            wb,
         })
     }
 
@@ -124,9 +129,14 @@ impl<'a> BuildSink<'a> {
     }
 
     /// Object `k`'s import stream, its ids implicit from `id_base`.
-    fn object_stream(dir: &Path, k: usize, id_base: u64) -> Result<StreamWriter, BuildError> {
+    fn object_stream(
+        dir: &Path,
+        k: usize,
+        id_base: u64,
+        wb: &std::sync::Arc<WriteBehind>,
+    ) -> Result<StreamWriter, BuildError> {
         let (path, ids) = (dir.join(format!("s{k}")), Ids::Implicit(id_base));
-        StreamWriter::create(&path, crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0, ids)
+        StreamWriter::create_with(&path, crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0, ids, Some(wb))
     }
 
     /// Whether any triangle came with attributes (split streams must then keep their ids).
@@ -141,7 +151,7 @@ impl<'a> BuildSink<'a> {
         }
         self.objects += 1;
         let base = self.id_base + self.stream.count();
-        let next = Self::object_stream(&self.dir, self.objects, base)?;
+        let next = Self::object_stream(&self.dir, self.objects, base, &self.wb)?;
         let done = std::mem::replace(&mut self.stream, next).finish()?;
         self.id_base = base;
         Ok(done)

@@ -18,6 +18,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 
 use megaray_base::{Aabb, Progress};
 
+use crate::behind::WriteBehind;
 use crate::stream::{disk_usage, Ids, StreamFile, StreamReader, StreamTri, StreamWriter, RELEASE_STEP};
 use crate::{check_cancel, BuildError, BuildOptions};
 
@@ -39,6 +40,8 @@ pub const ROOT_SAMPLE: usize = 1 << 18;
 pub const CHILD_SAMPLE: usize = 1 << 12;
 /// Write buffer of each child stream during routing.
 const CHILD_BUF: usize = 128 << 10;
+/// Child buffers queued for the writing thread at most (8 MiB).
+const WRITE_DEPTH: usize = 64;
 /// Records read at a time.
 const CHUNK: usize = 1 << 15;
 /// Plan pieces to this fraction of the limit, leaving room for sampling error.
@@ -212,9 +215,12 @@ fn route(
 ) -> Result<Vec<StreamFile>, BuildError> {
     let name = s.path.file_name().unwrap_or_default().to_string_lossy().into_owned();
     let dir = s.path.parent().expect("stream files live in a folder");
+    // The children are written by a thread of their own while this one reads and routes.
+    let wb = std::sync::Arc::new(WriteBehind::new(WRITE_DEPTH));
     let mut outs = (0..leaves)
         .map(|i| {
-            StreamWriter::create(&dir.join(format!("{name}_{i:03}")), CHILD_SAMPLE, CHILD_BUF, s.level + depth, ids)
+            let path = dir.join(format!("{name}_{i:03}"));
+            StreamWriter::create_with(&path, CHILD_SAMPLE, CHILD_BUF, s.level + depth, ids, Some(&wb))
         })
         .collect::<Result<Vec<_>, _>>()?;
     let mut r = StreamReader::open_consuming(s)?;

@@ -9,10 +9,12 @@
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use bytemuck::{Pod, Zeroable};
 use megaray_base::Aabb;
 
+use crate::behind::{Target, WriteBehind};
 use crate::BuildError;
 
 /// One triangle in a stream file. 48 bytes: corners, padding, id.
@@ -122,13 +124,20 @@ impl StreamFile {
 /// Writes a stream file, keeping its count, bounds, centroid bounds and a sample of its boxes.
 pub struct StreamWriter {
     path: PathBuf,
-    out: BufWriter<File>,
+    out: Out,
     count: u64,
     bounds: Aabb,
     cbounds: Aabb,
     sample: Sample,
     level: u32,
     ids: Ids,
+}
+
+/// Where a [`StreamWriter`]'s bytes go: through a buffer of its own, or in whole buffers to
+/// a [`WriteBehind`] thread.
+enum Out {
+    Buffered(BufWriter<File>),
+    Behind { target: Arc<Target>, buf: Vec<u8>, cap: usize, wb: Arc<WriteBehind> },
 }
 
 impl StreamWriter {
@@ -139,10 +148,32 @@ impl StreamWriter {
         level: u32,
         ids: Ids,
     ) -> Result<StreamWriter, BuildError> {
+        Self::create_with(path, sample_cap, buf, level, ids, None)
+    }
+
+    /// [`StreamWriter::create`], its buffers of `buf` bytes written by `wb`'s thread when
+    /// given one.
+    pub fn create_with(
+        path: &Path,
+        sample_cap: usize,
+        buf: usize,
+        level: u32,
+        ids: Ids,
+        wb: Option<&Arc<WriteBehind>>,
+    ) -> Result<StreamWriter, BuildError> {
         let f = File::create(path).map_err(|e| BuildError::io(path, "create", e))?;
+        let out = match wb {
+            None => Out::Buffered(BufWriter::with_capacity(buf, f)),
+            Some(wb) => Out::Behind {
+                target: Arc::new(Target { path: path.to_path_buf(), file: f }),
+                buf: wb.buffer(buf),
+                cap: buf,
+                wb: wb.clone(),
+            },
+        };
         Ok(StreamWriter {
             path: path.to_path_buf(),
-            out: BufWriter::with_capacity(buf, f),
+            out,
             count: 0,
             bounds: Aabb::EMPTY,
             cbounds: Aabb::EMPTY,
@@ -162,7 +193,17 @@ impl StreamWriter {
         self.count += 1;
         let bytes = bytemuck::bytes_of(t);
         let rec = if self.ids == Ids::Stored { bytes } else { &bytes[..CORNER_BYTES] };
-        self.out.write_all(rec).map_err(|e| BuildError::io(&self.path, "write", e))
+        match &mut self.out {
+            Out::Buffered(out) => out.write_all(rec).map_err(|e| BuildError::io(&self.path, "write", e)),
+            Out::Behind { target, buf, cap, wb } => {
+                if buf.len() + rec.len() > *cap {
+                    let full = std::mem::replace(buf, wb.buffer(*cap));
+                    wb.write(target, full)?;
+                }
+                buf.extend_from_slice(rec);
+                Ok(())
+            }
+        }
     }
 
     pub fn count(&self) -> u64 {
@@ -171,7 +212,17 @@ impl StreamWriter {
 
     pub fn finish(self) -> Result<StreamFile, BuildError> {
         let path = self.path;
-        self.out.into_inner().map_err(|e| BuildError::io(&path, "write", e.into_error()))?;
+        match self.out {
+            Out::Buffered(out) => {
+                out.into_inner().map_err(|e| BuildError::io(&path, "write", e.into_error()))?;
+            }
+            Out::Behind { target, buf, wb, .. } => {
+                if !buf.is_empty() {
+                    wb.write(&target, buf)?;
+                }
+                wb.sync()?;
+            }
+        }
         Ok(StreamFile {
             path,
             count: self.count,
