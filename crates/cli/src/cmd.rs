@@ -385,9 +385,10 @@ pub struct RenderArgs {
     /// pixels' footprint where a ray meets them. 0: full detail (the image then equals that
     /// of a scene built without levels of detail). With --mem, the error rises above this
     /// when a frame's working set would not fit the budget, and falls back when it does
-    /// (printed with --stats and --json).
-    #[arg(long, value_name = "PIXELS", default_value_t = 1.0)]
-    lod_error: f32,
+    /// (printed with --stats and --json). Default: 1, or 0 for a scene lit by area lights
+    /// (its levels of detail would misplace light and shadow near the lamps: see docs/PERF.md).
+    #[arg(long, value_name = "PIXELS")]
+    lod_error: Option<f32>,
     /// Under mpirun: a rank that holds tiles and sends nothing back for this long is lost
     /// (its tiles go to the others; once the image is written the job is ended).
     #[arg(long, value_name = "SECS", default_value_t = 60.0)]
@@ -445,7 +446,7 @@ impl RenderArgs {
             view: None,
             open: crate::open::OpenArgs { no_cache: false, build_mem: 2 << 30 },
             deadline: None,
-            lod_error: 1.0,
+            lod_error: Some(1.0),
             orbit: None,
             animate: None,
             mpi_timeout: 60.0,
@@ -483,7 +484,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     if a.adaptive > 255 {
         bail!("--adaptive must be 0..=255 samples a frame");
     }
-    if !(a.lod_error >= 0.0 && a.lod_error.is_finite()) {
+    if a.lod_error.is_some_and(|e| !(e >= 0.0 && e.is_finite())) {
         bail!("--lod-error must be a number of pixels, 0 or more");
     }
     if !(a.fov > 0.0 && a.fov < 180.0) {
@@ -659,7 +660,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             Tracer::new(&scene)
         }
     }
-    .with_lod_error(a.lod_error);
+    .with_lod_error(a.lod_error.unwrap_or(if area.is_some() { 0.0 } else { 1.0 }));
     if let Some(an) = &animate {
         let img = crate::animate::run(an, &scene, &renderer, &mut tracer, &pool, a.json)?;
         return save(&img, &a.out, exr, a.exposure, curve);
@@ -917,7 +918,7 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     r.adaptive = a.adaptive;
     r.denoise = !a.no_denoise;
     r.exposure = a.exposure;
-    r.lod_error = a.lod_error;
+    r.lod_error = Some(a.lod_error);
     r.paging = paging;
     render(r, bars)?;
     println!("{}", png.display());

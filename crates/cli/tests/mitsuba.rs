@@ -131,9 +131,9 @@ fn the_path_shader_matches_mitsuba_on_the_pbrt_staircase() {
         "256",
         "--max-depth",
         "64",
-        "--lod-error",
-        "0",
     ];
+    // With the default error of levels of detail (0 for a scene lit by area lights: with 1,
+    // the stand-ins near the lamp made this image 20-48 % too bright).
     let (code, _, err) = run(&args);
     assert_eq!(code, 0, "{err}");
     let (mad, bias) = difference(&out, &data("staircase-mitsuba.exr"));
