@@ -51,6 +51,9 @@ pub struct Texture {
     width: u32,
     height: u32,
     texels: Vec<[f32; 3]>,
+    /// The mean of the texels: the colour of a surface without texture coordinates (the
+    /// levels of detail carry none; far away a texture is seen as its average).
+    mean: Vec3,
 }
 
 impl Texture {
@@ -60,6 +63,18 @@ impl Texture {
         let x = ((u.rem_euclid(1.0) * self.width as f32) as u32).min(self.width - 1);
         let y = (((1.0 - v.rem_euclid(1.0)) * self.height as f32) as u32).min(self.height - 1);
         Vec3::from(self.texels[(y * self.width + x) as usize])
+    }
+
+    /// The mean colour of the texels.
+    pub fn mean(&self) -> Vec3 {
+        self.mean
+    }
+
+    fn new(width: u32, height: u32, texels: Vec<[f32; 3]>) -> Texture {
+        let sum = texels.iter().fold([0f64; 3], |a, t| [a[0] + t[0] as f64, a[1] + t[1] as f64, a[2] + t[2] as f64]);
+        let n = texels.len().max(1) as f64;
+        let mean = Vec3::new((sum[0] / n) as f32, (sum[1] / n) as f32, (sum[2] / n) as f32);
+        Texture { width, height, texels, mean }
     }
 }
 
@@ -86,15 +101,15 @@ impl TextureCache {
                     ((c + 0.055) / 1.055).powf(2.4)
                 }
             };
-            Arc::new(Texture {
-                width: img.width().max(1),
-                height: img.height().max(1),
-                texels: if img.width() == 0 || img.height() == 0 {
+            Arc::new(Texture::new(
+                img.width().max(1),
+                img.height().max(1),
+                if img.width() == 0 || img.height() == 0 {
                     vec![[1.0; 3]]
                 } else {
                     img.pixels().map(|p| p.0.map(lin)).collect()
                 },
-            })
+            ))
         });
         self.map.write().unwrap_or_else(|p| p.into_inner()).entry(path.to_string()).or_insert(tex).clone()
     }
@@ -111,10 +126,15 @@ pub fn material_at(scene: &Scene, hit: &Hit, textures: &TextureCache) -> Materia
             m.albedo = Vec3::from(c);
         }
         if let Some(tex) = d.texture.as_deref().and_then(|p| textures.get(p)) {
-            if let Some(uv) = scene.uvs(hit.part, hit.prim) {
-                let u = uv[0][0] * w[0] + uv[1][0] * w[1] + uv[2][0] * w[2];
-                let v = uv[0][1] * w[0] + uv[1][1] * w[1] + uv[2][1] * w[2];
-                m.albedo *= tex.sample(u, v);
+            match scene.uvs(hit.part, hit.prim) {
+                Some(uv) => {
+                    let u = uv[0][0] * w[0] + uv[1][0] * w[1] + uv[2][0] * w[2];
+                    let v = uv[0][1] * w[0] + uv[1][1] * w[1] + uv[2][1] * w[2];
+                    m.albedo *= tex.sample(u, v);
+                }
+                // A stand-in (levels of detail keep no texture coordinates): the texture's
+                // mean, not white.
+                None => m.albedo *= tex.mean(),
             }
         }
         m.specular = d.specular.map(Vec3::from).unwrap_or(Vec3::ZERO);
@@ -131,4 +151,17 @@ pub fn material_at(scene: &Scene, hit: &Hit, textures: &TextureCache) -> Materia
         m.albedo = Vec3::from(a);
     }
     m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A surface without texture coordinates (a level of detail) takes the texture's mean.
+    #[test]
+    fn a_texture_knows_its_mean() {
+        let t = Texture::new(2, 1, vec![[0.2, 0.4, 0.0], [0.6, 0.0, 1.0]]);
+        assert!((t.mean() - Vec3::new(0.4, 0.2, 0.5)).abs().max_element() < 1e-6);
+        assert_eq!(t.sample(0.25, 0.5), Vec3::new(0.2, 0.4, 0.0));
+    }
 }
