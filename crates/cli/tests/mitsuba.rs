@@ -133,7 +133,7 @@ fn the_path_shader_matches_mitsuba_on_the_pbrt_staircase() {
         "64",
     ];
     // With the default error of levels of detail (0 for a scene lit by area lights: with 1,
-    // the stand-ins near the lamp made this image 20-48 % too bright).
+    // the stand-ins change this image's light by 15-45 %, docs/PERF.md).
     let (code, _, err) = run(&args);
     assert_eq!(code, 0, "{err}");
     let (mad, bias) = difference(&out, &data("staircase-mitsuba.exr"));
