@@ -136,7 +136,7 @@ impl<'a> BuildSink<'a> {
         wb: &std::sync::Arc<WriteBehind>,
     ) -> Result<StreamWriter, BuildError> {
         let (path, ids) = (dir.join(format!("s{k}")), Ids::Implicit(id_base));
-        StreamWriter::create_with(&path, crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0, ids, Some(wb))
+        StreamWriter::create(&path, crate::split::ROOT_SAMPLE, crate::stream::IO_BUF, 0, ids, wb)
     }
 
     /// Whether any triangle came with attributes (split streams must then keep their ids).

@@ -220,7 +220,7 @@ fn route(
     let mut outs = (0..leaves)
         .map(|i| {
             let path = dir.join(format!("{name}_{i:03}"));
-            StreamWriter::create_with(&path, CHILD_SAMPLE, CHILD_BUF, s.level + depth, ids, Some(&wb))
+            StreamWriter::create(&path, CHILD_SAMPLE, CHILD_BUF, s.level + depth, ids, &wb)
         })
         .collect::<Result<Vec<_>, _>>()?;
     let mut r = StreamReader::open_consuming(s)?;

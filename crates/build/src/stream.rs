@@ -7,7 +7,7 @@
 //! the full 48.
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Write};
+use std::io::{BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -122,9 +122,14 @@ impl StreamFile {
 }
 
 /// Writes a stream file, keeping its count, bounds, centroid bounds and a sample of its boxes.
+/// Its bytes go in whole buffers to a [`WriteBehind`] thread (shared by a split pass's
+/// children), so that the copy into the page cache overlaps the caller's work.
 pub struct StreamWriter {
     path: PathBuf,
-    out: Out,
+    target: Arc<Target>,
+    buf: Vec<u8>,
+    cap: usize,
+    wb: Arc<WriteBehind>,
     count: u64,
     bounds: Aabb,
     cbounds: Aabb,
@@ -133,47 +138,23 @@ pub struct StreamWriter {
     ids: Ids,
 }
 
-/// Where a [`StreamWriter`]'s bytes go: through a buffer of its own, or in whole buffers to
-/// a [`WriteBehind`] thread.
-enum Out {
-    Buffered(BufWriter<File>),
-    Behind { target: Arc<Target>, buf: Vec<u8>, cap: usize, wb: Arc<WriteBehind> },
-}
-
 impl StreamWriter {
+    /// A stream file at `path`, written by `wb`'s thread in buffers of `buf` bytes.
     pub fn create(
         path: &Path,
         sample_cap: usize,
         buf: usize,
         level: u32,
         ids: Ids,
-    ) -> Result<StreamWriter, BuildError> {
-        Self::create_with(path, sample_cap, buf, level, ids, None)
-    }
-
-    /// [`StreamWriter::create`], its buffers of `buf` bytes written by `wb`'s thread when
-    /// given one.
-    pub fn create_with(
-        path: &Path,
-        sample_cap: usize,
-        buf: usize,
-        level: u32,
-        ids: Ids,
-        wb: Option<&Arc<WriteBehind>>,
+        wb: &Arc<WriteBehind>,
     ) -> Result<StreamWriter, BuildError> {
         let f = File::create(path).map_err(|e| BuildError::io(path, "create", e))?;
-        let out = match wb {
-            None => Out::Buffered(BufWriter::with_capacity(buf, f)),
-            Some(wb) => Out::Behind {
-                target: Arc::new(Target { path: path.to_path_buf(), file: f }),
-                buf: wb.buffer(buf),
-                cap: buf,
-                wb: wb.clone(),
-            },
-        };
         Ok(StreamWriter {
             path: path.to_path_buf(),
-            out,
+            target: Arc::new(Target { path: path.to_path_buf(), file: f }),
+            buf: wb.buffer(buf),
+            cap: buf,
+            wb: wb.clone(),
             count: 0,
             bounds: Aabb::EMPTY,
             cbounds: Aabb::EMPTY,
@@ -193,17 +174,12 @@ impl StreamWriter {
         self.count += 1;
         let bytes = bytemuck::bytes_of(t);
         let rec = if self.ids == Ids::Stored { bytes } else { &bytes[..CORNER_BYTES] };
-        match &mut self.out {
-            Out::Buffered(out) => out.write_all(rec).map_err(|e| BuildError::io(&self.path, "write", e)),
-            Out::Behind { target, buf, cap, wb } => {
-                if buf.len() + rec.len() > *cap {
-                    let full = std::mem::replace(buf, wb.buffer(*cap));
-                    wb.write(target, full)?;
-                }
-                buf.extend_from_slice(rec);
-                Ok(())
-            }
+        if self.buf.len() + rec.len() > self.cap {
+            let full = std::mem::replace(&mut self.buf, self.wb.buffer(self.cap));
+            self.wb.write(&self.target, full)?;
         }
+        self.buf.extend_from_slice(rec);
+        Ok(())
     }
 
     pub fn count(&self) -> u64 {
@@ -212,17 +188,10 @@ impl StreamWriter {
 
     pub fn finish(self) -> Result<StreamFile, BuildError> {
         let path = self.path;
-        match self.out {
-            Out::Buffered(out) => {
-                out.into_inner().map_err(|e| BuildError::io(&path, "write", e.into_error()))?;
-            }
-            Out::Behind { target, buf, wb, .. } => {
-                if !buf.is_empty() {
-                    wb.write(&target, buf)?;
-                }
-                wb.sync()?;
-            }
+        if !self.buf.is_empty() {
+            self.wb.write(&self.target, self.buf)?;
         }
+        self.wb.sync()?;
         Ok(StreamFile {
             path,
             count: self.count,
