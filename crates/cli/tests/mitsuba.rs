@@ -18,38 +18,25 @@ fn data(name: &str) -> String {
 /// Mean absolute difference and bias of megaray's image of `name` against Mitsuba's, as
 /// fractions of Mitsuba's mean.
 fn against_mitsuba(name: &str) -> (f64, f64) {
+    let sky = data(&format!("{name}-sky.hdr"));
+    let view = ["--env", &sky, "--res", "160x120", "--fov", "40", "--eye", "0,1.3,4.2", "--at", "0,0.8,0"];
+    let (_dir, out) = build_and_render(&data(&format!("{name}.obj")), &view);
+    difference(&out, &data(&format!("{name}-mitsuba.exr")))
+}
+
+/// Builds `input` and renders it with the `path` shader, 256 frames, depth 64 and `more`
+/// arguments into an EXR; returns its folder (kept while the image is read) and path.
+fn build_and_render(input: &str, more: &[&str]) -> (tempfile::TempDir, String) {
     let dir = tempfile::tempdir().unwrap();
     let scene = dir.path().join("s.mray").to_string_lossy().into_owned();
-    let (code, _, err) = run(&["build", &data(&format!("{name}.obj")), "-o", &scene, "-q"]);
+    let (code, _, err) = run(&["build", input, "-o", &scene, "-q"]);
     assert_eq!(code, 0, "{err}");
     let out = dir.path().join("s.exr").to_string_lossy().into_owned();
-    let sky = data(&format!("{name}-sky.hdr"));
-    let args = [
-        "render",
-        &scene,
-        "-o",
-        &out,
-        "-q",
-        "--shader",
-        "path",
-        "--env",
-        &sky,
-        "--res",
-        "160x120",
-        "--frames",
-        "256",
-        "--max-depth",
-        "64",
-        "--fov",
-        "40",
-        "--eye",
-        "0,1.3,4.2",
-        "--at",
-        "0,0.8,0",
-    ];
+    let mut args = vec!["render", &scene, "-o", &out, "-q", "--shader", "path", "--frames", "256", "--max-depth", "64"];
+    args.extend_from_slice(more);
     let (code, _, err) = run(&args);
     assert_eq!(code, 0, "{err}");
-    difference(&out, &data(&format!("{name}-mitsuba.exr")))
+    (dir, out)
 }
 
 /// Mean absolute difference and bias of the image `ours` against `theirs`, as fractions of
@@ -112,30 +99,9 @@ fn the_path_shader_matches_mitsuba_on_the_open_box_the_glass_sphere_the_sun_and_
 fn the_path_shader_matches_mitsuba_on_the_pbrt_staircase() {
     let pbrt =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/models/pbrt-staircase/staircase.pbrt");
-    let dir = tempfile::tempdir().unwrap();
-    let scene = dir.path().join("s.mray").to_string_lossy().into_owned();
-    let (code, _, err) = run(&["build", &pbrt.to_string_lossy(), "-o", &scene, "-q"]);
-    assert_eq!(code, 0, "{err}");
-    let out = dir.path().join("s.exr").to_string_lossy().into_owned();
-    let args = [
-        "render",
-        &scene,
-        "-o",
-        &out,
-        "-q",
-        "--shader",
-        "path",
-        "--res",
-        "90x160",
-        "--frames",
-        "256",
-        "--max-depth",
-        "64",
-    ];
     // With the default error of levels of detail (0 for a scene lit by area lights: with 1,
     // the stand-ins change this image's light by 15-45 %, docs/PERF.md).
-    let (code, _, err) = run(&args);
-    assert_eq!(code, 0, "{err}");
+    let (_dir, out) = build_and_render(&pbrt.to_string_lossy(), &["--res", "90x160"]);
     let (mad, bias) = difference(&out, &data("staircase-mitsuba.exr"));
     let (mad5, _) = difference_in_blocks(&out, &data("staircase-mitsuba.exr"), 5);
     eprintln!(
