@@ -9,7 +9,7 @@ the mean absolute difference as a fraction of Mitsuba's mean pixel value, and th
 error of the tone-mapped images when flip-evaluator is installed. One JSON line per scene.
 
     python3 compare.py [--megaray BIN] [--res 160x120] [--frames 1024] [--spp 4096]
-                       [--scene all|box,glass,sun,glossy] [--save-reference] [--check 0.03]
+                       [--scene all|box,glass,sun,glossy,staircase] [--save-reference] [--check 0.03] [--keep DIR]
 
 --save-reference writes Mitsuba's image beside this script (`<scene>-mitsuba.exr`) with the
 scene as megaray reads it (`<scene>.obj`, `.mtl`, `-sky.hdr`): the reference the Rust test
