@@ -78,11 +78,16 @@ pub struct ClusterOptions {
     pub timeout: Duration,
     /// The sleep between looks at the messages when there is nothing to do.
     pub poll: Duration,
+    /// The nice value the render threads run at (the thread that talks to the other ranks
+    /// keeps its own): a rank hands out and takes in work while its render threads hold
+    /// every core, and a batch waiting on it leaves a render thread idle somewhere else
+    /// (`docs/PERF.md`). Linux only; 0 leaves them as they are.
+    pub render_nice: i32,
 }
 
 impl Default for ClusterOptions {
     fn default() -> ClusterOptions {
-        ClusterOptions { timeout: Duration::from_secs(60), poll: Duration::from_micros(50) }
+        ClusterOptions { timeout: Duration::from_secs(60), poll: Duration::from_micros(50), render_nice: 10 }
     }
 }
 
@@ -104,4 +109,41 @@ pub enum ClusterError {
     /// A message that makes no sense.
     #[error("rank {rank} sent a bad message: {what}")]
     Protocol { rank: usize, what: String },
+}
+
+/// Lowers every thread of `pool` to `nice` (a per-thread attribute on Linux, which any
+/// process may raise; a thread already nicer keeps its value). Elsewhere does nothing.
+pub fn lower_priority(pool: &rayon::ThreadPool, nice: i32) {
+    #[cfg(target_os = "linux")]
+    pool.broadcast(|_| {
+        use rustix::process::{getpriority_process, setpriority_process};
+        let me = Some(rustix::thread::gettid());
+        if getpriority_process(me).is_ok_and(|now| now < nice) {
+            // Best effort: a thread that keeps its priority only waits longer.
+            let _ = setpriority_process(me, nice);
+        }
+    });
+    #[cfg(not(target_os = "linux"))]
+    let _ = (pool, nice);
+}
+
+#[cfg(all(test, target_os = "linux"))]
+mod tests {
+    use rustix::process::getpriority_process;
+    use rustix::thread::gettid;
+
+    #[test]
+    fn render_threads_run_nicer_and_never_less_nice() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let now = getpriority_process(Some(gettid())).unwrap();
+        let want = (now + 3).min(19);
+        super::lower_priority(&pool, want);
+        let nice = || pool.broadcast(|_| getpriority_process(Some(gettid())).unwrap());
+        assert_eq!(nice(), vec![want; 2]);
+        // Asked for less nice than they are, they stay as they are.
+        super::lower_priority(&pool, now);
+        assert_eq!(nice(), vec![want; 2]);
+        // The calling thread is not the pool's.
+        assert_eq!(getpriority_process(Some(gettid())).unwrap(), now);
+    }
 }

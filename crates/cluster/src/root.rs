@@ -5,7 +5,7 @@ use std::collections::VecDeque;
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
 
-use megaray_render::{Accumulator, Environment, Frame, Piece, Rect, Renderer};
+use megaray_render::{Accumulator, Environment, Frame, Piece, Rect, Renderer, TILE};
 use megaray_trace::jobs::JobStats;
 use megaray_trace::Tracer;
 
@@ -47,6 +47,29 @@ pub struct Cluster<T: Transport> {
     pub total: FrameComm,
     /// The next frame, begun on the other ranks (at the root).
     ahead: Option<Ahead>,
+    /// What each tile cost in the last frame finished (at the root).
+    costs: Option<TileCosts>,
+    /// Whether the render threads run at `opts.render_nice` yet.
+    niced: bool,
+}
+
+/// What each tile of a `w` x `h` frame cost to render: seconds of one thread, by tile index
+/// (rows of tiles, as [`Rect::tiles`]). The next frame of the same size hands out the
+/// costliest tiles first and sizes batches by cost, so that the frame ends on cheap tiles
+/// spread over every rank instead of on one rank's batch of costly ones.
+struct TileCosts {
+    w: u32,
+    h: u32,
+    secs: Vec<f32>,
+}
+
+/// A batch's least predicted cost for another rank, per thread: enough work to hide the
+/// round trip of its pieces and its next batch.
+const MIN_REMOTE_BATCH_SECS: f64 = 1e-3;
+
+/// A tile's index in the rows of tiles of a frame `cols` tiles wide.
+fn tile_index(r: &Rect, cols: u32) -> usize {
+    ((r.y0 / TILE) * cols + r.x0 / TILE) as usize
 }
 
 /// A frame begun on the other ranks while the caller was busy with the one before
@@ -84,6 +107,8 @@ impl<T: Transport> Cluster<T> {
             last: FrameComm::default(),
             total: FrameComm::default(),
             ahead: None,
+            costs: None,
+            niced: false,
         };
         if c.t.rank() != 0 {
             let (tag, b) = ToRoot::Hello { checksum, threads: threads as u32 }.encode();
@@ -141,6 +166,14 @@ impl<T: Transport> Cluster<T> {
         self.t.rank() == 0
     }
 
+    /// Puts `pool`'s threads below this one, once ([`ClusterOptions::render_nice`]).
+    fn lower_priority(&mut self, pool: &rayon::ThreadPool) {
+        if !self.niced {
+            crate::lower_priority(pool, self.opts.render_nice);
+            self.niced = true;
+        }
+    }
+
     /// The ranks lost so far (at the root).
     pub fn lost(&self) -> Vec<usize> {
         (0..self.lost.len()).filter(|&r| self.lost[r]).collect()
@@ -151,8 +184,9 @@ impl<T: Transport> Cluster<T> {
         &self.t
     }
 
-    /// The next message from the root, waiting up to `limit` (sleeping between looks,
-    /// longer and longer while nothing comes, up to 5 ms).
+    /// The next message from the root, waiting up to `limit` (sleeping between looks: `poll`
+    /// for the first 20 ms, as the next frame usually comes at once, then longer and longer
+    /// while nothing comes, up to 500 us).
     fn wait_root(&self, limit: Option<Duration>) -> Result<ToWorker, ClusterError> {
         let start = Instant::now();
         let mut nap = self.opts.poll;
@@ -167,7 +201,9 @@ impl<T: Transport> Cluster<T> {
                 return Err(ClusterError::RootSilent { rank: self.t.rank(), secs: start.elapsed().as_secs_f64() });
             }
             std::thread::sleep(nap);
-            nap = (nap * 2).min(Duration::from_micros(500));
+            if start.elapsed() > Duration::from_millis(20) {
+                nap = (nap * 2).min(Duration::from_micros(500));
+            }
         }
     }
 
@@ -183,6 +219,7 @@ impl<T: Transport> Cluster<T> {
         pool: &rayon::ThreadPool,
     ) -> Result<u32, ClusterError> {
         assert!(!self.is_root(), "the root renders with render_frame");
+        self.lower_priority(pool);
         let mut frames = 0;
         loop {
             match self.wait_root(None)? {
@@ -289,6 +326,7 @@ impl<T: Transport> Cluster<T> {
         sink: &mut dyn FnMut(&Piece),
     ) -> Result<JobStats, ClusterError> {
         assert!(self.is_root(), "workers render with serve");
+        self.lower_priority(pool);
         let start = Instant::now();
         let message = frame_message(r, tracer, frame);
         let mut q = match self.ahead.take() {
@@ -319,6 +357,8 @@ impl<T: Transport> Cluster<T> {
         });
         res?;
         let busy = busy?.busy;
+        let cam = r.settings.camera;
+        self.costs = Some(TileCosts { w: cam.width, h: cam.height, secs: std::mem::take(&mut q.measured) });
         if next {
             let message = frame_message(r, tracer, frame + 1);
             let q = self.begin(r, frame + 1, &message);
@@ -335,7 +375,6 @@ impl<T: Transport> Cluster<T> {
         t.root_wait += q.comm.root_wait;
         t.root_tiles += q.comm.root_tiles;
         t.tiles += q.comm.tiles;
-        let cam = r.settings.camera;
         Ok(JobStats { finished: (cam.width * cam.height) as u64, rays: q.rays, ..q.jobs })
     }
 
@@ -343,9 +382,24 @@ impl<T: Transport> Cluster<T> {
     /// [`LANES`] batches each. The queue returned has no frame buffer yet.
     fn begin(&mut self, r: &Renderer, frame: u32, message: &(crate::Tag, Vec<u8>)) -> Queue {
         let cam = r.settings.camera;
-        let tiles = Rect::tiles(cam.width, cam.height);
+        let mut tiles = Rect::tiles(cam.width, cam.height);
+        let n_tiles = tiles.len();
+        // The last frame's costs, if it had this size: costliest tiles first.
+        let cost: Vec<f32> = match &self.costs {
+            Some(c) if (c.w, c.h) == (cam.width, cam.height) && c.secs.len() == n_tiles => c.secs.clone(),
+            _ => Vec::new(),
+        };
+        if !cost.is_empty() {
+            let mut order: Vec<usize> = (0..n_tiles).collect();
+            order.sort_by(|&a, &b| cost[b].total_cmp(&cost[a]));
+            tiles = order.into_iter().map(|k| tiles[k]).collect();
+        }
         let now = Instant::now();
         let mut q = Queue {
+            left: cost.iter().map(|&c| c as f64).sum(),
+            cols: cam.width.div_ceil(TILE),
+            measured: vec![0.0; n_tiles],
+            cost,
             queue: tiles.iter().copied().collect(),
             peers: (0..self.t.size()).map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: now }).collect(),
             aovs: r.settings.aovs,
@@ -424,6 +478,15 @@ struct Queue {
     done: usize,
     comm: FrameComm,
     total_threads: u32,
+    /// Each tile's predicted cost (the last frame's, by tile index), or empty: then batches
+    /// are sized by tile count alone.
+    cost: Vec<f32>,
+    /// The predicted cost of the tiles in the queue.
+    left: f64,
+    /// Tiles per row of tiles.
+    cols: u32,
+    /// Each tile's cost in this frame, as its pieces come back.
+    measured: Vec<f32>,
 }
 
 impl Queue {
@@ -445,7 +508,9 @@ impl Queue {
         let mut nap = poll;
         while self.done < total {
             let mut got = false;
-            while let Some((from, tag, bytes)) = send.t.try_recv() {
+            // One message from another rank a pass, so that this rank's render thread, whose
+            // messages come between, is never left waiting behind a burst of them.
+            if let Some((from, tag, bytes)) = send.t.try_recv() {
                 got = true;
                 self.comm.bytes_in += bytes.len() as u64;
                 self.comm.messages += 1;
@@ -454,8 +519,7 @@ impl Queue {
                 }
                 match ToRoot::decode(from, tag, &bytes)? {
                     ToRoot::Done { frame: f, pieces, stats } if f == frame => {
-                        self.take(from, pieces, stats, sink)?;
-                        self.feed(send, from, frame);
+                        self.take(send, from, frame, pieces, stats, sink)?;
                     }
                     other => {
                         return Err(ClusterError::Protocol { rank: from, what: format!("{other:?} in frame {frame}") })
@@ -479,7 +543,10 @@ impl Queue {
                 );
                 eprint!("{line}");
                 for batch in peer.outstanding.drain(..).rev() {
-                    batch.into_iter().rev().for_each(|t| self.queue.push_front(t));
+                    for t in batch.into_iter().rev() {
+                        self.left += self.cost.get(tile_index(&t, self.cols)).map_or(0.0, |&c| c as f64);
+                        self.queue.push_front(t);
+                    }
                 }
                 peer.parked = 0;
                 self.total_threads -= send.threads[p];
@@ -505,6 +572,11 @@ impl Queue {
                 .min()
                 .unwrap_or(0);
             let most = if shortest >= 32 { 16 } else { 4 };
+            // This rank's render thread idle (the frame's end): its core is free, so look
+            // often, as what comes now is what the frame waits for.
+            if self.peers[0].outstanding.is_empty() {
+                nap = poll;
+            }
             match from_local.recv_timeout(nap) {
                 Ok(m) => {
                     self.take_local(send, m, frame, sink)?;
@@ -539,8 +611,7 @@ impl Queue {
     ) -> Result<(), ClusterError> {
         if let ToRoot::Done { pieces, stats, .. } = m {
             self.comm.root_tiles += pieces.len() as u64;
-            self.take(0, pieces, stats, sink)?;
-            self.feed(send, 0, frame);
+            self.take(send, 0, frame, pieces, stats, sink)?;
         }
         Ok(())
     }
@@ -553,18 +624,35 @@ impl Queue {
         }
     }
 
-    /// Gives rank `p` its next batch: a share of the tiles left in proportion to its
-    /// threads (a quarter of its share, so that batches shrink toward the frame's end),
-    /// at least one tile and at most 32 per thread (long batches hide the round trip, see
-    /// `docs/PERF.md`). With none left, the lane is parked.
+    /// Gives rank `p` its next batch: a share of the work left in proportion to its threads
+    /// (a quarter of its share, so that batches shrink toward the frame's end), at least one
+    /// tile and at most 32 per thread (long batches hide the round trip, see `docs/PERF.md`).
+    /// The work is the tiles' predicted cost when the last frame measured it (another rank's
+    /// batch then costs at least [`MIN_REMOTE_BATCH_SECS`] a thread), else their count.
+    /// With none left, the lane is parked.
     fn feed<T: Transport>(&mut self, send: &mut Sender<T>, p: usize, frame: u32) {
         if self.queue.is_empty() {
             self.peers[p].parked += 1;
             return;
         }
         let th = send.threads[p] as usize;
-        let share = self.queue.len() * th / (4 * self.total_threads.max(1) as usize);
-        let n = share.clamp(1, 32 * th).min(self.queue.len());
+        let total = self.total_threads.max(1) as usize;
+        let most = (32 * th).min(self.queue.len());
+        let n = if self.cost.is_empty() {
+            (self.queue.len() * th / (4 * total)).clamp(1, most)
+        } else {
+            let mut want = self.left * th as f64 / (4 * total) as f64;
+            if p != 0 {
+                want = want.max(MIN_REMOTE_BATCH_SECS * th as f64);
+            }
+            let (mut n, mut got) = (0, 0.0);
+            while n < most && (n == 0 || got < want) {
+                got += self.cost[tile_index(&self.queue[n], self.cols)] as f64;
+                n += 1;
+            }
+            self.left = (self.left - got).max(0.0);
+            n
+        };
         let rects: Vec<Rect> = self.queue.drain(..n).collect();
         let peer = &mut self.peers[p];
         if peer.outstanding.is_empty() {
@@ -574,10 +662,13 @@ impl Queue {
         self.send_counted(send, p, ToWorker::Work { frame, rects });
     }
 
-    /// Puts rank `p`'s pieces into the frame: they must be its oldest batch, in order.
-    fn take(
+    /// Puts rank `p`'s pieces into the frame (they must be its oldest batch, in order), and
+    /// gives it its next batch first, so that it renders while they are added.
+    fn take<T: Transport>(
         &mut self,
+        send: &mut Sender<T>,
         p: usize,
+        frame: u32,
         pieces: Vec<Piece>,
         stats: JobStats,
         sink: &mut dyn FnMut(&Piece),
@@ -600,13 +691,20 @@ impl Queue {
                     what: format!("a tile {:?} of the wrong size", pc.rect),
                 });
             }
-            self.rays += pc.rays;
-            sink(pc);
         }
         peer.since = Instant::now();
         self.done += batch.len();
         self.jobs.suspended += stats.suspended;
         self.jobs.wait_secs += stats.wait_secs;
+        self.feed(send, p, frame);
+        for pc in &pieces {
+            self.rays += pc.rays;
+            if let Some(m) = self.measured.get_mut(tile_index(&pc.rect, self.cols)) {
+                // A worker's figure, trusted only as far as it is a duration.
+                *m = if pc.secs.is_finite() { pc.secs.clamp(0.0, 1e3) } else { 0.0 };
+            }
+            sink(pc);
+        }
         Ok(())
     }
 }

@@ -266,6 +266,7 @@ impl ToRoot {
                 for p in pieces {
                     o.rect(&p.rect);
                     o.u64(p.rays);
+                    o.u32(p.secs.to_bits());
                     let flags = ((!p.depth.is_empty() as u32) * AOVS) | ((!p.approx.is_empty() as u32) * APPROX);
                     o.u32(flags);
                     o.bytes(bytemuck::cast_slice(&p.color));
@@ -299,7 +300,7 @@ impl ToRoot {
                     rays: i.u64()?,
                     wait_secs: f64::from_bits(i.u64()?),
                 };
-                if n > i.b.len() / 28 {
+                if n > i.b.len() / 32 {
                     return Err(ClusterError::Protocol { rank: from, what: "a count past the message's end".into() });
                 }
                 let mut pieces = Vec::with_capacity(n);
@@ -313,9 +314,9 @@ impl ToRoot {
                             what: format!("a tile {rect:?} past the message's end"),
                         });
                     }
-                    let (rays, flags) = (i.u64()?, i.u32()?);
+                    let (rays, secs, flags) = (i.u64()?, f32::from_bits(i.u32()?), i.u32()?);
                     let a = rect.area();
-                    let mut p = Piece { rect, rays, color: i.pods(a)?, ..Piece::default() };
+                    let mut p = Piece { rect, rays, secs, color: i.pods(a)?, ..Piece::default() };
                     if flags & AOVS != 0 {
                         (p.depth, p.normal, p.albedo) = (i.pods(a)?, i.pods(a)?, i.pods(a)?);
                     }
@@ -349,6 +350,7 @@ mod tests {
             albedo: if aovs { (0..n).map(|k| [0.5, f(k), 0.25]).collect() } else { Vec::new() },
             approx: if approx { (0..n).map(|k| k % 2 == 0).collect() } else { Vec::new() },
             rays: 1234,
+            secs: 0.25,
         }
     }
 

@@ -166,8 +166,14 @@ pub(crate) fn relay<T: Transport>(
                 }
                 // Nothing came. While the render thread holds a batch beyond the one it
                 // renders (or the lanes are closed), the root has nothing urgent to say:
-                // wait for the render thread alone. Otherwise look at MPI again soon.
-                let wait = if open == 0 || held >= 2 { poll * 20 } else { nap };
+                // wait for the render thread alone. While it holds none, its core is free
+                // and the next batch is what it waits for: look at MPI often. Otherwise,
+                // soon.
+                let wait = match (open == 0 || held >= 2, held == 0) {
+                    (true, _) => poll * 20,
+                    (false, true) => poll,
+                    (false, false) => nap,
+                };
                 nap = (nap * 2).min(poll * 4);
                 match from_render.recv_timeout(wait) {
                     Ok(m) => {

@@ -219,11 +219,18 @@ impl Accumulator {
             // A row of the piece against its place in the sums.
             let (at, q) = ((y * self.width + rc.x0) as usize, row * pw);
             let (to, from) = (at..at + pw, q..q + pw);
-            let sums = self.sum[to.clone()].iter_mut().zip(&mut self.lum_sq[to.clone()]);
-            let counts = self.counts[to.clone()].iter_mut().zip(&mut self.provisional[to.clone()]);
-            for (j, ((sum, lum_sq), (count, provisional))) in sums.zip(counts).enumerate() {
-                let approx = !p.approx.is_empty() && p.approx[q + j];
-                add_sample(sum, lum_sq, count, provisional, p.color[q + j], approx);
+            if p.approx.is_empty() && !self.provisional[to.clone()].contains(&true) {
+                // Every pixel exact, onto exact sums: add_sample's plain case, as add_frame.
+                let (sum, lum_sq, counts) =
+                    (&mut self.sum[to.clone()], &mut self.lum_sq[to.clone()], &mut self.counts[to.clone()]);
+                add_plain(sum, lum_sq, counts, &p.color[from.clone()]);
+            } else {
+                let sums = self.sum[to.clone()].iter_mut().zip(&mut self.lum_sq[to.clone()]);
+                let counts = self.counts[to.clone()].iter_mut().zip(&mut self.provisional[to.clone()]);
+                for (j, ((sum, lum_sq), (count, provisional))) in sums.zip(counts).enumerate() {
+                    let approx = !p.approx.is_empty() && p.approx[q + j];
+                    add_sample(sum, lum_sq, count, provisional, p.color[q + j], approx);
+                }
             }
             if aovs {
                 // As `add_frame`: the first frame's depth is taken, later ones' minimum.

@@ -7,6 +7,8 @@
 use megaray_trace::jobs::{self, JobOptions, JobStats};
 use megaray_trace::{RayCaster, Tracer};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
 
 use crate::frame::{Frame, Renderer, TILE};
 use crate::rows::{Group, GROUP};
@@ -67,6 +69,9 @@ pub struct Piece {
     pub approx: Vec<bool>,
     /// Rays fired.
     pub rays: u64,
+    /// Seconds of one thread spent rendering it: what the tile costs, for a queue that hands
+    /// out the costly tiles first (`megaray-cluster`).
+    pub secs: f32,
 }
 
 impl Piece {
@@ -81,6 +86,7 @@ impl Piece {
             albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
             approx: Vec::new(),
             rays: 0,
+            secs: 0.0,
         }
     }
 
@@ -102,7 +108,11 @@ pub fn render_pieces(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect]) 
     if tracer.pager().is_none() {
         // Nothing can suspend: a piece a task, its pixels straight into it (as the in-core
         // frame loop does).
-        pieces.par_iter_mut().for_each(|pc| fill_in_core(r, tracer, frame, pc));
+        pieces.par_iter_mut().for_each(|pc| {
+            let t = Instant::now();
+            fill_in_core(r, tracer, frame, pc);
+            pc.secs = t.elapsed().as_secs_f32();
+        });
     } else {
         render_paged(r, tracer, frame, rects, &mut pieces, &mut stats);
     }
@@ -147,6 +157,17 @@ fn fill_in_core(r: &Renderer, tracer: &Tracer, frame: u32, pc: &mut Piece) {
 fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], pieces: &mut [Piece], stats: &mut JobStats) {
     let job_opts =
         |chunk| JobOptions { chunk, deadline: None, max_parked: jobs::MAX_PARKED, stand_in: r.settings.stand_in };
+    // Each piece's cost: nanoseconds of its jobs, summed over the threads that ran them,
+    // from one job in `every` (a clock read costs a tenth of a small job) times `every`.
+    let nanos: Vec<AtomicU64> = rects.iter().map(|_| AtomicU64::new(0)).collect();
+    let timed = |k: usize, every: usize, p: u32, job: &mut dyn FnMut()| {
+        if !k.is_multiple_of(every) {
+            return job();
+        }
+        let t = Instant::now();
+        job();
+        nanos[p as usize].fetch_add(t.elapsed().as_nanos() as u64 * every as u64, Ordering::Relaxed);
+    };
     if r.settings.aovs {
         // A pixel a job: (piece, index in it).
         let order: Vec<(u32, u32)> =
@@ -155,7 +176,9 @@ fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], piece
             let (p, i) = order[k];
             let rc = rects[p as usize];
             let w = rc.x1 - rc.x0;
-            r.pixel(rc.x0 + i % w, rc.y0 + i / w, frame, caster).map(|s| (s, caster.take_approx()))
+            let mut out = None;
+            timed(k, 16, p, &mut || out = Some(r.pixel(rc.x0 + i % w, rc.y0 + i / w, frame, caster)));
+            out.expect("the job ran").map(|s| (s, caster.take_approx()))
         });
         *stats = run.stats;
         for (k, (s, apx)) in run.into_finished() {
@@ -181,7 +204,11 @@ fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], piece
                 }
             }
         }
-        let run = jobs::run(tracer, groups.len(), &job_opts(8), |k, caster| r.group(groups[k].1, frame, caster));
+        let run = jobs::run(tracer, groups.len(), &job_opts(8), |k, caster| {
+            let mut out = None;
+            timed(k, 4, groups[k].0, &mut || out = Some(r.group(groups[k].1, frame, caster)));
+            out.expect("the job ran")
+        });
         *stats = run.stats;
         for (k, out) in run.into_finished() {
             let (p, g) = groups[k];
@@ -196,6 +223,9 @@ fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], piece
             }
             pc.rays += out.rays as u64;
         }
+    }
+    for (pc, n) in pieces.iter_mut().zip(&nanos) {
+        pc.secs = n.load(Ordering::Relaxed) as f32 * 1e-9;
     }
 }
 

@@ -36,13 +36,18 @@ fn pieces_put_together_equal_the_whole_frame() {
             tiles.reverse();
             for tracer in [Tracer::new(&scene), Tracer::paged(&pager)] {
                 let mut f = Frame::new(w, h, aovs);
+                let mut secs = 0.0;
                 for batch in tiles.chunks(3) {
                     let (pieces, stats) = render_pieces(&r, &tracer, 5, batch);
                     assert_eq!(stats.finished, batch.iter().map(|t| t.area() as u64).sum::<u64>());
                     for p in &pieces {
                         f.put(p);
+                        // What each tile cost (sampled on a paged tracer: an edge tile may show 0).
+                        assert!(p.secs.is_finite() && p.secs >= 0.0, "{:?} took {} s", p.rect, p.secs);
+                        secs += p.secs;
                     }
                 }
+                assert!(secs > 0.0, "no piece measured its cost");
                 let bits = |f: &Frame| f.image.pixels.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&f), bits(&whole), "aovs {aovs} spp {spp} paged {}", tracer.pager().is_some());
                 assert_eq!(f.rays, whole.rays);
