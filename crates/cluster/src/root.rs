@@ -508,8 +508,9 @@ impl Queue {
         let mut nap = poll;
         while self.done < total {
             let mut got = false;
-            // One message from another rank a pass, so that this rank's render thread, whose
-            // messages come between, is never left waiting behind a burst of them.
+            // One message from another rank and one from this rank's render thread a pass:
+            // taking either in a burst starves the other (adding a batch to the frame can
+            // take longer than rendering the next, so a burst may never end).
             if let Some((from, tag, bytes)) = send.t.try_recv() {
                 got = true;
                 self.comm.bytes_in += bytes.len() as u64;
@@ -526,7 +527,7 @@ impl Queue {
                     }
                 }
             }
-            while let Ok(m) = from_local.try_recv() {
+            if let Ok(m) = from_local.try_recv() {
                 got = true;
                 self.take_local(send, m, frame, sink)?;
             }
