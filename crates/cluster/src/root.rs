@@ -67,6 +67,9 @@ struct TileCosts {
 /// round trip of its pieces and its next batch.
 const MIN_REMOTE_BATCH_SECS: f64 = 1e-3;
 
+/// Pieces added to the frame between two looks at the messages.
+const SINK_AT_ONCE: usize = 4;
+
 /// A tile's index in the rows of tiles of a frame `cols` tiles wide.
 fn tile_index(r: &Rect, cols: u32) -> usize {
     ((r.y0 / TILE) * cols + r.x0 / TILE) as usize
@@ -364,6 +367,8 @@ impl<T: Transport> Cluster<T> {
             let q = self.begin(r, frame + 1, &message);
             self.ahead = Some(Ahead { frame: frame + 1, message, q });
         }
+        // The pieces not added yet, once the other ranks have the next frame's work.
+        q.unsunk.drain(..).for_each(|pc| sink(&pc));
         q.comm.seconds = start.elapsed().as_secs_f64();
         q.comm.root_wait = (q.comm.seconds - busy).max(0.0);
         self.last = q.comm;
@@ -399,6 +404,7 @@ impl<T: Transport> Cluster<T> {
             left: cost.iter().map(|&c| c as f64).sum(),
             cols: cam.width.div_ceil(TILE),
             measured: vec![0.0; n_tiles],
+            unsunk: VecDeque::new(),
             cost,
             queue: tiles.iter().copied().collect(),
             peers: (0..self.t.size()).map(|_| Peer { outstanding: VecDeque::new(), parked: 0, since: now }).collect(),
@@ -487,12 +493,14 @@ struct Queue {
     cols: u32,
     /// Each tile's cost in this frame, as its pieces come back.
     measured: Vec<f32>,
+    /// Pieces back and not yet added to the frame.
+    unsunk: VecDeque<Piece>,
 }
 
 impl Queue {
     /// Runs the frame's queue until every tile is back (every rank given its first
-    /// batches already): gives a rank a new batch for each one back, and requeues the tiles
-    /// of ranks lost.
+    /// batches already): gives a rank a new batch for each one back, adds pieces to `sink`
+    /// between (the last ones are left in `unsunk`), and requeues the tiles of ranks lost.
     fn dispatch<T: Transport>(
         &mut self,
         send: &mut Sender<T>,
@@ -520,7 +528,7 @@ impl Queue {
                 }
                 match ToRoot::decode(from, tag, &bytes)? {
                     ToRoot::Done { frame: f, pieces, stats } if f == frame => {
-                        self.take(send, from, frame, pieces, stats, sink)?;
+                        self.take(send, from, frame, pieces, stats)?;
                     }
                     other => {
                         return Err(ClusterError::Protocol { rank: from, what: format!("{other:?} in frame {frame}") })
@@ -529,7 +537,7 @@ impl Queue {
             }
             if let Ok(m) = from_local.try_recv() {
                 got = true;
-                self.take_local(send, m, frame, sink)?;
+                self.take_local(send, m, frame)?;
             }
             for p in 1..self.peers.len() {
                 let peer = &mut self.peers[p];
@@ -559,6 +567,13 @@ impl Queue {
                     }
                 }
             }
+            // Pieces are added a few at a time between looks at the messages: adding is
+            // the longest thing this thread does, and a rank waiting for its next batch
+            // should not wait behind it.
+            for pc in self.unsunk.drain(..self.unsunk.len().min(SINK_AT_ONCE)) {
+                got = true;
+                sink(&pc);
+            }
             if got {
                 nap = poll;
                 continue;
@@ -580,7 +595,7 @@ impl Queue {
             }
             match from_local.recv_timeout(nap) {
                 Ok(m) => {
-                    self.take_local(send, m, frame, sink)?;
+                    self.take_local(send, m, frame)?;
                     nap = poll;
                 }
                 Err(e) => {
@@ -592,7 +607,7 @@ impl Queue {
                 }
             }
         }
-        // Every tile is back: close every lane.
+        // Every tile is back: close every lane (the caller adds the pieces not added yet).
         for (p, &gone) in lost.iter().enumerate() {
             while !gone && self.peers[p].parked > 0 {
                 self.peers[p].parked -= 1;
@@ -603,16 +618,10 @@ impl Queue {
     }
 
     /// Takes a message from this rank's own render thread.
-    fn take_local<T: Transport>(
-        &mut self,
-        send: &mut Sender<T>,
-        m: ToRoot,
-        frame: u32,
-        sink: &mut dyn FnMut(&Piece),
-    ) -> Result<(), ClusterError> {
+    fn take_local<T: Transport>(&mut self, send: &mut Sender<T>, m: ToRoot, frame: u32) -> Result<(), ClusterError> {
         if let ToRoot::Done { pieces, stats, .. } = m {
             self.comm.root_tiles += pieces.len() as u64;
-            self.take(send, 0, frame, pieces, stats, sink)?;
+            self.take(send, 0, frame, pieces, stats)?;
         }
         Ok(())
     }
@@ -663,8 +672,8 @@ impl Queue {
         self.send_counted(send, p, ToWorker::Work { frame, rects });
     }
 
-    /// Puts rank `p`'s pieces into the frame (they must be its oldest batch, in order), and
-    /// gives it its next batch first, so that it renders while they are added.
+    /// Takes rank `p`'s pieces (they must be its oldest batch, in order) and gives it its
+    /// next batch; the pieces wait in `unsunk` to be added to the frame.
     fn take<T: Transport>(
         &mut self,
         send: &mut Sender<T>,
@@ -672,7 +681,6 @@ impl Queue {
         frame: u32,
         pieces: Vec<Piece>,
         stats: JobStats,
-        sink: &mut dyn FnMut(&Piece),
     ) -> Result<(), ClusterError> {
         let peer = &mut self.peers[p];
         let batch = peer.outstanding.pop_front().unwrap_or_default();
@@ -704,8 +712,8 @@ impl Queue {
                 // A worker's figure, trusted only as far as it is a duration.
                 *m = if pc.secs.is_finite() { pc.secs.clamp(0.0, 1e3) } else { 0.0 };
             }
-            sink(pc);
         }
+        self.unsunk.extend(pieces);
         Ok(())
     }
 }
