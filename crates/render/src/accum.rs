@@ -16,9 +16,13 @@ use crate::env::luminance;
 use crate::frame::{render_frame, Frame, Renderer};
 use crate::image_out::{Aovs, Image};
 use crate::region::Piece;
+use crate::tiled::TileLayout;
+use crate::TILE;
 
 /// Running sums of frames: per pixel the colour sum and the sum of squared luminance (for
-/// the error estimate), and the AOV sums.
+/// the error estimate), and the AOV sums. Every per-pixel buffer is stored tile by tile
+/// ([`TileLayout`]): a piece (a tile) is added as one contiguous block; frames, images and
+/// AOVs go in and out row-major.
 #[derive(Clone, Debug)]
 pub struct Accumulator {
     width: u32,
@@ -123,12 +127,19 @@ impl Accumulator {
         (self.width, self.height) = (w, h);
     }
 
+    /// Where each pixel's sums are stored.
+    fn layout(&self) -> TileLayout {
+        TileLayout { w: self.width, h: self.height }
+    }
+
     /// Forgets the samples of the pixels marked in `pixels` (row-major; as if no frame had
     /// finished them yet): adaptive sampling restarts the pixels it chooses.
     pub fn restart(&mut self, pixels: &[bool]) {
+        let w = self.width.max(1) as usize;
         for (i, _) in pixels.iter().enumerate().filter(|(_, &p)| p) {
             if i < self.sum.len() {
-                (self.sum[i], self.lum_sq[i], self.counts[i], self.provisional[i]) = ([0.0; 3], 0.0, 0, false);
+                let s = self.layout().index((i % w) as u32, (i / w) as u32);
+                (self.sum[s], self.lum_sq[s], self.counts[s], self.provisional[s]) = ([0.0; 3], 0.0, 0, false);
             }
         }
     }
@@ -154,44 +165,62 @@ impl Accumulator {
             (self.width, self.height),
             "frame size differs from the accumulator's"
         );
-        // In rows on the current thread pool (a view adds a frame every frame).
-        const ROW: usize = 4096;
+        // In bands of tile rows on the current thread pool (a view adds a frame every frame):
+        // a band's sums span what its rows span row-major.
+        let layout = self.layout();
+        let band = layout.band().max(1);
         let plain = f.done.is_empty() && f.approx.is_empty();
         let (counts, provisional) = (&mut self.counts, &mut self.provisional);
         self.sum
-            .par_chunks_mut(ROW)
-            .zip(self.lum_sq.par_chunks_mut(ROW))
-            .zip(counts.par_chunks_mut(ROW).zip(provisional.par_chunks_mut(ROW)))
+            .par_chunks_mut(band)
+            .zip(self.lum_sq.par_chunks_mut(band))
+            .zip(counts.par_chunks_mut(band).zip(provisional.par_chunks_mut(band)))
             .enumerate()
-            .for_each(|(r, ((sum, lum_sq), (counts, provisional)))| {
-                if plain && !provisional.contains(&true) {
-                    // Every pixel done, exactly, onto exact sums: add_sample's plain case.
-                    add_plain(sum, lum_sq, counts, &f.image.pixels[r * ROW..r * ROW + sum.len()]);
-                    return;
-                }
-                for j in 0..sum.len() {
-                    let i = r * ROW + j;
-                    if !f.is_done(i) {
-                        continue;
+            .for_each(|(b, ((sum, lum_sq), (counts, provisional)))| {
+                let (base, y0) = (b * band, b as u32 * TILE);
+                let all_plain = plain && !provisional.contains(&true);
+                let rows = (sum.len() / layout.w as usize) as u32;
+                // Tile by tile, its rows in turn: the sums are written as one stream, the
+                // frame's band read from the cache.
+                for x0 in (0..layout.w).step_by(TILE as usize) {
+                    for y in y0..y0 + rows {
+                        let tw = layout.tile_w(x0) as usize;
+                        let s = layout.tile_start(x0, y0) - base + (y - y0) as usize * tw;
+                        let i = (y * layout.w + x0) as usize;
+                        let (sum, lum_sq) = (&mut sum[s..s + tw], &mut lum_sq[s..s + tw]);
+                        let (counts, provisional) = (&mut counts[s..s + tw], &mut provisional[s..s + tw]);
+                        if all_plain {
+                            // Every pixel done, exactly, onto exact sums: add_sample's plain case.
+                            add_plain(sum, lum_sq, counts, &f.image.pixels[i..i + tw]);
+                            continue;
+                        }
+                        for j in 0..tw {
+                            if f.is_done(i + j) {
+                                let (p, approx) = (f.image.pixels[i + j], f.is_approx(i + j));
+                                add_sample(&mut sum[j], &mut lum_sq[j], &mut counts[j], &mut provisional[j], p, approx);
+                            }
+                        }
                     }
-                    let p = f.image.pixels[i];
-                    add_sample(&mut sum[j], &mut lum_sq[j], &mut counts[j], &mut provisional[j], p, f.is_approx(i));
                 }
             });
         if !f.depth.is_empty() {
             if self.frames == 0 || self.depth.is_empty() {
-                self.depth = f.depth.clone();
+                self.depth = layout.scatter(&f.depth);
                 self.normal = vec![[0.0; 3]; f.normal.len()];
                 self.albedo = vec![[0.0; 3]; f.albedo.len()];
             }
-            for (d, e) in self.depth.iter_mut().zip(&f.depth) {
-                *d = d.min(*e);
-            }
-            for (a, b) in self.normal.iter_mut().zip(&f.normal).chain(self.albedo.iter_mut().zip(&f.albedo)) {
-                for k in 0..3 {
-                    a[k] += b[k];
+            let (depth, normal, albedo) = (&mut self.depth, &mut self.normal, &mut self.albedo);
+            layout.runs(|s, i, n| {
+                for (d, e) in depth[s..s + n].iter_mut().zip(&f.depth[i..i + n]) {
+                    *d = d.min(*e);
                 }
-            }
+                let normals = normal[s..s + n].iter_mut().zip(&f.normal[i..i + n]);
+                for (a, b) in normals.chain(albedo[s..s + n].iter_mut().zip(&f.albedo[i..i + n])) {
+                    for k in 0..3 {
+                        a[k] += b[k];
+                    }
+                }
+            });
         }
         self.rays += f.rays;
         self.end_frame(&f.jobs);
@@ -215,10 +244,25 @@ impl Accumulator {
         assert!(rc.within(self.width, self.height), "piece {rc:?} outside the accumulator");
         let pw = (rc.x1 - rc.x0) as usize;
         let aovs = !p.depth.is_empty() && !self.depth.is_empty();
+        // The piece's pixels in runs contiguous in the sums: a row's part in each tile it
+        // crosses, runs that follow each other merged (a piece that is a tile is one run).
+        let layout = self.layout();
+        let mut runs: Vec<(usize, usize, usize)> = Vec::new();
         for (row, y) in (rc.y0..rc.y1).enumerate() {
-            // A row of the piece against its place in the sums.
-            let (at, q) = ((y * self.width + rc.x0) as usize, row * pw);
-            let (to, from) = (at..at + pw, q..q + pw);
+            let mut x = rc.x0;
+            while x < rc.x1 {
+                let end = ((x / TILE + 1) * TILE).min(rc.x1);
+                let (s, q, n) = (layout.index(x, y), row * pw + (x - rc.x0) as usize, (end - x) as usize);
+                match runs.last_mut() {
+                    Some(last) if last.0 + last.2 == s && last.1 + last.2 == q => last.2 += n,
+                    _ => runs.push((s, q, n)),
+                }
+                x = end;
+            }
+        }
+        for (at, q, n) in runs {
+            // A run of the piece against its place in the sums.
+            let (to, from) = (at..at + n, q..q + n);
             if p.approx.is_empty() && !self.provisional[to.clone()].contains(&true) {
                 // Every pixel exact, onto exact sums: add_sample's plain case, as add_frame.
                 let (sum, lum_sq, counts) =
@@ -267,15 +311,13 @@ impl Accumulator {
         Image {
             width: self.width,
             height: self.height,
-            pixels: self
-                .sum
-                .par_iter()
-                .zip(&self.counts)
-                .map(|(s, &n)| {
-                    let inv = 1.0 / n.max(1) as f64;
-                    s.map(|c| (c * inv) as f32)
-                })
-                .collect(),
+            pixels: self.layout().gather_runs(|out, s| {
+                let n = out.len();
+                for (o, (sum, &k)) in out.iter_mut().zip(self.sum[s..s + n].iter().zip(&self.counts[s..s + n])) {
+                    let inv = 1.0 / k.max(1) as f64;
+                    *o = sum.map(|c| (c * inv) as f32);
+                }
+            }),
         }
     }
 
@@ -285,13 +327,9 @@ impl Accumulator {
         if self.frames < 2 {
             return None;
         }
-        let v = self
-            .sum
-            .par_iter()
-            .zip(&self.lum_sq)
-            .zip(&self.counts)
-            .map(|((s, &q), &k)| mean_and_variance(s, q, k).map_or(0.0, |(_, var)| var as f32))
-            .collect();
+        let v = self.layout().gather(|i| {
+            mean_and_variance(&self.sum[i], self.lum_sq[i], self.counts[i]).map_or(0.0, |(_, var)| var as f32)
+        });
         Some(v)
     }
 
@@ -344,12 +382,11 @@ impl Accumulator {
             return Aovs::default();
         }
         let inv = 1.0 / self.frames.max(1) as f32;
+        let layout = self.layout();
         Aovs {
-            depth: Some(self.depth.clone()),
-            normal: Some(
-                self.normal.iter().map(|n| megaray_base::Vec3::from(*n).normalize_or_zero().to_array()).collect(),
-            ),
-            albedo: Some(self.albedo.iter().map(|a| a.map(|c| c * inv)).collect()),
+            depth: Some(layout.gather(|i| self.depth[i])),
+            normal: Some(layout.gather(|i| megaray_base::Vec3::from(self.normal[i]).normalize_or_zero().to_array())),
+            albedo: Some(layout.gather(|i| self.albedo[i].map(|c| c * inv))),
         }
     }
 
@@ -361,14 +398,17 @@ impl Accumulator {
         if self.frames < 2 {
             return None;
         }
+        // Summed in row-major order (the same figure, to the bit, whatever the layout).
         let mut var_sum = 0.0;
         let mut lum_sum = 0.0;
-        for ((s, &q), &k) in self.sum.iter().zip(&self.lum_sq).zip(&self.counts) {
-            if let Some((mean, var)) = mean_and_variance(s, q, k) {
-                var_sum += var;
-                lum_sum += mean;
+        self.layout().runs(|s, _, n| {
+            for i in s..s + n {
+                if let Some((mean, var)) = mean_and_variance(&self.sum[i], self.lum_sq[i], self.counts[i]) {
+                    var_sum += var;
+                    lum_sum += mean;
+                }
             }
-        }
+        });
         let pixels = self.sum.len().max(1) as f64;
         let mean_lum = lum_sum / pixels;
         Some(if mean_lum > 0.0 { (var_sum / pixels).sqrt() / mean_lum } else { 0.0 })
@@ -461,7 +501,20 @@ mod tests {
     /// Frame `k` of a `w` x `h` sequence cut into pieces: values that differ per pixel and
     /// frame (a negative zero among them), some pixels approximate in the early frames.
     fn pieces(w: u32, h: u32, k: u32, aovs: bool) -> Vec<Piece> {
-        let mut ps: Vec<Piece> = Rect::tiles(w, h).into_iter().map(|r| Piece::blank(r, aovs)).collect();
+        pieces_of(Rect::tiles(w, h), k, aovs)
+    }
+
+    /// The same over rectangles that are not tiles (20 x 12, crossing tiles' edges).
+    fn odd_pieces(w: u32, h: u32, k: u32, aovs: bool) -> Vec<Piece> {
+        let rects = (0..h.div_ceil(12))
+            .flat_map(|j| (0..w.div_ceil(20)).map(move |i| (i * 20, j * 12)))
+            .map(|(x0, y0)| Rect { x0, y0, x1: (x0 + 20).min(w), y1: (y0 + 12).min(h) })
+            .collect();
+        pieces_of(rects, k, aovs)
+    }
+
+    fn pieces_of(rects: Vec<Rect>, k: u32, aovs: bool) -> Vec<Piece> {
+        let mut ps: Vec<Piece> = rects.into_iter().map(|r| Piece::blank(r, aovs)).collect();
         for p in &mut ps {
             for i in 0..p.color.len() {
                 let v = ((i as u32 * 7 + k * 13 + p.rect.x0 * 3 + p.rect.y0) % 17) as f32 * 0.37;
@@ -481,10 +534,12 @@ mod tests {
     #[test]
     fn pieces_added_as_they_come_equal_the_frame_added_whole() {
         let (w, h) = (70, 45);
-        for aovs in [false, true] {
+        for (aovs, cut) in
+            [(false, pieces as fn(u32, u32, u32, bool) -> Vec<Piece>), (true, pieces), (true, odd_pieces)]
+        {
             let (mut whole, mut piecewise) = (Accumulator::new(w, h), Accumulator::new(w, h));
             for k in 0..4 {
-                let ps = pieces(w, h, k, aovs);
+                let ps = cut(w, h, k, aovs);
                 let mut f = Frame::new(w, h, aovs);
                 ps.iter().for_each(|p| f.put(p));
                 f.jobs.finished = (w * h) as u64;
@@ -504,5 +559,71 @@ mod tests {
                 assert_eq!(aov_bits(&piecewise), aov_bits(&whole), "frame {k}");
             }
         }
+    }
+
+    /// What the accumulator gives out (image, variance, error, AOVs; restarted pixels) is
+    /// what sums kept row-major, pixel by pixel, give: the tile layout is only storage.
+    #[test]
+    fn outputs_are_the_row_major_means() {
+        let (w, h) = (70, 45);
+        let n = (w * h) as usize;
+        let mut acc = Accumulator::new(w, h);
+        let (mut sum, mut lum_sq, mut counts, mut prov) =
+            (vec![[0.0; 3]; n], vec![0.0; n], vec![0u32; n], vec![false; n]);
+        let (mut depth, mut normal, mut albedo) = (vec![f32::INFINITY; n], vec![[0.0f32; 3]; n], vec![[0.0f32; 3]; n]);
+        for k in 0..5 {
+            let mut f = Frame::new(w, h, true);
+            odd_pieces(w, h, k, true).iter().for_each(|p| f.put(p));
+            if k == 3 {
+                // A frame that left some pixels undone.
+                f.done = (0..n).map(|i| i % 7 != 0).collect();
+            }
+            acc.add_frame(&f);
+            for i in (0..n).filter(|&i| f.is_done(i)) {
+                add_sample(
+                    &mut sum[i],
+                    &mut lum_sq[i],
+                    &mut counts[i],
+                    &mut prov[i],
+                    f.image.pixels[i],
+                    f.is_approx(i),
+                );
+            }
+            for i in 0..n {
+                depth[i] = depth[i].min(f.depth[i]);
+                for c in 0..3 {
+                    (normal[i][c], albedo[i][c]) = (normal[i][c] + f.normal[i][c], albedo[i][c] + f.albedo[i][c]);
+                }
+            }
+            if k == 2 {
+                let chosen: Vec<bool> = (0..n).map(|i| i % 11 == 3).collect();
+                acc.restart(&chosen);
+                for i in (0..n).filter(|&i| chosen[i]) {
+                    (sum[i], lum_sq[i], counts[i], prov[i]) = ([0.0; 3], 0.0, 0, false);
+                }
+            }
+        }
+        let bits = |v: &[[f32; 3]]| v.iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+        let want: Vec<[f32; 3]> = (0..n).map(|i| sum[i].map(|c| (c / counts[i].max(1) as f64) as f32)).collect();
+        assert_eq!(bits(&acc.image().pixels), bits(&want));
+        let var: Vec<f32> =
+            (0..n).map(|i| mean_and_variance(&sum[i], lum_sq[i], counts[i]).map_or(0.0, |(_, v)| v as f32)).collect();
+        assert_eq!(acc.variance_of_mean().unwrap(), var);
+        let (mut var_sum, mut lum_sum) = (0.0, 0.0);
+        for i in 0..n {
+            if let Some((m, v)) = mean_and_variance(&sum[i], lum_sq[i], counts[i]) {
+                (var_sum, lum_sum) = (var_sum + v, lum_sum + m);
+            }
+        }
+        let err = (var_sum / n as f64).sqrt() / (lum_sum / n as f64);
+        assert_eq!(acc.error().unwrap().to_bits(), err.to_bits());
+        assert_eq!((acc.unfinished(), acc.approx_pixels()), (counts.iter().filter(|&&c| c == 0).count(), 0));
+        let a = acc.aovs();
+        assert_eq!(a.depth.unwrap(), depth);
+        let normal: Vec<[f32; 3]> =
+            normal.iter().map(|v| megaray_base::Vec3::from(*v).normalize_or_zero().to_array()).collect();
+        assert_eq!(bits(&a.normal.unwrap()), bits(&normal));
+        let albedo: Vec<[f32; 3]> = albedo.iter().map(|v| v.map(|c| c * (1.0 / 5.0))).collect();
+        assert_eq!(bits(&a.albedo.unwrap()), bits(&albedo));
     }
 }

@@ -80,6 +80,7 @@ mod settings;
 mod shader;
 pub mod shaders;
 mod sky;
+mod tiled;
 mod visibility;
 mod world;
 
