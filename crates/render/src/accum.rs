@@ -447,7 +447,9 @@ pub fn render_progressive(
     on_frame: impl FnMut(&Accumulator),
 ) -> Accumulator {
     let frame = |i, acc: &mut Accumulator| {
-        acc.add_frame(&render_frame(r, tracer, i));
+        let f = render_frame(r, tracer, i);
+        acc.add_frame(&f);
+        r.recycle(f);
         Ok::<_, std::convert::Infallible>(())
     };
     render_progressive_with(r, tracer, stop, frame, on_frame).unwrap_or_else(|e| match e {})

@@ -8,7 +8,7 @@
 //! samples; on a paged tracer, pixels that wait for tiles are parked and resumed.
 
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use megaray_base::{Aabb, Ray, Vec3};
@@ -53,6 +53,16 @@ pub struct Renderer {
     /// The pixels that take more samples (`settings.adaptive`), chosen between frames by
     /// the progressive loop ([`Renderer::sample_more`]).
     more: std::sync::OnceLock<crate::adaptive::PixelSamples>,
+    /// Buffers of frames done with, filled again by the next ([`Renderer::recycle`]): a
+    /// frame's are megabytes, and fresh ones cost their page faults on every frame.
+    spare: Mutex<Spare>,
+}
+
+/// See [`Renderer::recycle`].
+#[derive(Default)]
+struct Spare {
+    pixels: Vec<[f32; 3]>,
+    groups: jobs::JobsBuffers<rows::GroupOut>,
 }
 
 impl std::ops::Deref for Renderer {
@@ -83,7 +93,36 @@ impl Renderer {
             world: World::new(settings, bounds),
             passes: AtomicU32::new(0),
             more: Default::default(),
+            spare: Mutex::default(),
         }
+    }
+
+    /// Takes back a frame rendered with it and done with: the next frame of the same size
+    /// fills its image buffer again instead of a new one.
+    pub fn recycle(&self, f: Frame) {
+        self.spare().pixels = f.image.pixels;
+    }
+
+    fn spare(&self) -> std::sync::MutexGuard<'_, Spare> {
+        self.spare.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// A black `w` x `h` frame (AOV buffers when `aovs`), in a recycled image buffer when
+    /// there is one of its size.
+    fn blank_frame(&self, w: u32, h: u32, aovs: bool) -> Frame {
+        let mut pixels = std::mem::take(&mut self.spare().pixels);
+        let mut f = Frame::blank(0, 0, false);
+        if pixels.len() == (w * h) as usize {
+            pixels.fill([0.0; 3]);
+            f.image = Image { width: w, height: h, pixels };
+        } else {
+            f.image = Image::new(w, h);
+        }
+        if aovs {
+            let n = (w * h) as usize;
+            (f.depth, f.normal, f.albedo) = (vec![0.0; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+        }
+        f
     }
 
     /// Lights the scene with `env` (what misses see, and the lights of every shader).
@@ -460,7 +499,7 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     let max_parked = if opts.deadline.is_some() { jobs::MAX_PARKED_DEADLINE } else { jobs::MAX_PARKED };
     let n = (w * h) as usize;
     let aovs = r.settings.aovs;
-    let mut f = Frame::blank(w, h, aovs);
+    let mut f = r.blank_frame(w, h, aovs);
     let mut finished: Vec<u32> = Vec::new();
     let mut approx: Vec<u32> = Vec::new();
     // Jobs in the order of rows' groups (`rows`): tiles, and against a deadline interleaved
@@ -494,7 +533,9 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     } else {
         // A group a job.
         let job_opts = JobOptions { chunk: 8, deadline: opts.deadline, max_parked, stand_in: opts.stand_in };
-        let run = jobs::run(tracer, groups.len(), &job_opts, |i, caster| r.group(groups[i], frame, caster));
+        let spare = std::mem::take(&mut r.spare().groups);
+        let run =
+            jobs::run_reusing(tracer, groups.len(), &job_opts, |i, caster| r.group(groups[i], frame, caster), spare);
         f.jobs = run.stats;
         let partial = f.jobs.unfinished > 0;
         let mut pixels = 0u64;
@@ -541,6 +582,8 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
         });
         // The loop's counts are of jobs; the frame's, of pixels.
         (f.jobs.finished, f.jobs.unfinished) = (pixels, n as u64 - pixels);
+        drop(outs);
+        r.spare().groups = run.into_buffers();
     }
     if !approx.is_empty() {
         f.approx = vec![false; n];
@@ -569,7 +612,7 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
     if !aovs {
         // Bands of rows, each written in place: within a band, 32-pixel columns a row's
         // group at a time (`rows`). No per-tile buffers, no copies.
-        let mut f = Frame::blank(w, h, false);
+        let mut f = r.blank_frame(w, h, false);
         let band = (BAND_ROWS * w) as usize;
         f.rays = f
             .image
@@ -625,7 +668,7 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
         })
         .collect();
     let n = (w * h) as usize;
-    let mut f = Frame::blank(w, h, aovs);
+    let mut f = r.blank_frame(w, h, aovs);
     for ((tx, ty), t) in tiles.iter().zip(results) {
         f.rays += t.rays;
         let (x0, x1) = (tx * TILE, ((tx + 1) * TILE).min(w));

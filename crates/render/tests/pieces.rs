@@ -60,3 +60,34 @@ fn pieces_put_together_equal_the_whole_frame() {
         }
     }
 }
+
+/// A frame rendered into the buffers of one done with (`Renderer::recycle`) is the frame
+/// rendered fresh, and what a deadline leaves is black, not the old frame's pixels.
+#[test]
+fn recycled_buffers_give_the_same_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = common::balls(dir.path(), 48, 16);
+    let scene = Scene::open(&path).unwrap();
+    let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, 75, 41);
+    let pager =
+        Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 256 * 1024, fetchers: 2 }).unwrap();
+    let bits = |f: &Frame| f.image.pixels.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for tracer in [Tracer::new(&scene), Tracer::paged(&pager)] {
+        let r = Renderer::new(RenderSettings::new(cam), &scene.header().bounds);
+        let fresh = render_frame(&r, &tracer, 5);
+        for _ in 0..2 {
+            r.recycle(render_frame(&r, &tracer, 6));
+            let again = render_frame(&r, &tracer, 5);
+            assert_eq!(bits(&again), bits(&fresh));
+            assert_eq!((again.rays, again.jobs.finished), (fresh.rays, fresh.jobs.finished));
+        }
+        // A deadline already past: pixels not done are black.
+        r.recycle(render_frame(&r, &tracer, 6));
+        let late = FrameOptions { deadline: Some(std::time::Instant::now()), stand_in: false };
+        let f = render_frame_with(&r, &tracer, 5, &late);
+        assert!(f.jobs.unfinished > 0, "the deadline left nothing");
+        for (i, p) in f.image.pixels.iter().enumerate() {
+            assert!(f.is_done(i) || *p == [0.0; 3], "pixel {i} not done but {p:?}");
+        }
+    }
+}

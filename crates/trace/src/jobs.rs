@@ -92,6 +92,13 @@ impl<T> JobsResult<T> {
         self.per_thread.into_iter().flatten().map(|(i, v)| (i as usize, v))
     }
 
+    /// The result vectors, emptied, to be filled by a later run ([`run_reusing`]).
+    pub fn into_buffers(self) -> JobsBuffers<T> {
+        let mut v = self.per_thread;
+        v.iter_mut().for_each(Vec::clear);
+        JobsBuffers(v)
+    }
+
     /// One slot per job `0..n`, `None` where the job did not finish by the deadline.
     pub fn into_ordered(self, n: usize) -> Vec<Option<T>> {
         let mut out: Vec<Option<T>> = (0..n).map(|_| None).collect();
@@ -99,6 +106,17 @@ impl<T> JobsResult<T> {
             out[i] = Some(v);
         }
         out
+    }
+}
+
+/// The result vectors of an earlier run ([`JobsResult::into_buffers`]), for [`run_reusing`]
+/// to fill again: a frame's results are megabytes, and fresh vectors cost their page faults
+/// on every frame.
+pub struct JobsBuffers<T>(Vec<Vec<(u32, T)>>);
+
+impl<T> Default for JobsBuffers<T> {
+    fn default() -> JobsBuffers<T> {
+        JobsBuffers(Vec::new())
     }
 }
 
@@ -324,6 +342,16 @@ where
     T: Send,
     F: Fn(usize, &mut Replay) -> Result<T, Suspended> + Sync,
 {
+    run_reusing(tracer, n, opts, job, JobsBuffers::default())
+}
+
+/// [`run`], its results put into `buffers` (an earlier run's) rather than new vectors.
+pub fn run_reusing<T, F>(tracer: &Tracer, n: usize, opts: &JobOptions, job: F, buffers: JobsBuffers<T>) -> JobsResult<T>
+where
+    T: Send,
+    F: Fn(usize, &mut Replay) -> Result<T, Suspended> + Sync,
+{
+    let buffers: Vec<Mutex<Vec<(u32, T)>>> = buffers.0.into_iter().map(Mutex::new).collect();
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
     let lot = Mutex::new(ParkLot::default());
@@ -363,10 +391,15 @@ where
     let threads = rayon::current_num_threads().max(1);
     // One worker loop on every thread of the pool (broadcast: a plain parallel iterator
     // could run two loops one after the other on one thread).
-    let per_thread: Vec<Vec<(u32, T)>> = rayon::broadcast(|_| {
+    let per_thread: Vec<Vec<(u32, T)>> = rayon::broadcast(|ctx| {
         let mut replay = Replay::new(tracer);
         replay.stand_in = opts.stand_in;
-        let mut out: Vec<(u32, T)> = Vec::with_capacity(n / threads + chunk);
+        let mut out: Vec<(u32, T)> = match buffers.get(ctx.index()) {
+            Some(b) => std::mem::take(&mut *b.lock().unwrap_or_else(|p| p.into_inner())),
+            None => Vec::new(),
+        };
+        out.clear();
+        out.reserve(n / threads + chunk);
         let mut to_park: Vec<(u32, Parked)> = Vec::new();
         let mut seen_arrivals = u64::MAX;
         // Set after a wait that saw no tile arrive: ask again for the tiles parked jobs wait

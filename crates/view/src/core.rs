@@ -585,6 +585,7 @@ impl<'t, 's> ViewCore<'t, 's> {
             approx: frame.approx.iter().filter(|&&a| a).count() as u64,
             moving,
         };
+        self.renderer.recycle(frame);
         self.compose();
         true
     }
