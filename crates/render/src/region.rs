@@ -69,8 +69,9 @@ pub struct Piece {
     pub approx: Vec<bool>,
     /// Rays fired.
     pub rays: u64,
-    /// Seconds of one thread spent rendering it: what the tile costs, for a queue that hands
-    /// out the costly tiles first (`megaray-cluster`).
+    /// Seconds of one thread spent rendering it (in core timed whole; on a paged tracer one
+    /// job in four timed and scaled): what the tile costs, for a queue that hands out the
+    /// costly tiles first (`megaray-cluster`).
     pub secs: f32,
 }
 
