@@ -226,9 +226,20 @@ fn window<'t>(
 ) -> Result<()> {
     let (w, h) = (opts.width as usize, opts.height as usize);
     let title = format!("megaray - {name}");
-    let mut win = minifb::Window::new(&title, w, h, minifb::WindowOptions { resize: true, ..Default::default() })
+    // A few tries: an X server that has just started, or is busy, can refuse a connection
+    // for a moment (seen under Xvfb on a loaded machine: `XOpenDisplay failed`).
+    let open = || minifb::Window::new(&title, w, h, minifb::WindowOptions { resize: true, ..Default::default() });
+    let mut win = open()
+        .or_else(|_| {
+            std::thread::sleep(std::time::Duration::from_millis(500));
+            open()
+        })
+        .or_else(|_| {
+            std::thread::sleep(std::time::Duration::from_secs(2));
+            open()
+        })
         .map_err(|e| {
-            anyhow::anyhow!("cannot open a window ({e}); is DISPLAY set? (megaray serve shows the view in a browser)")
+            anyhow::anyhow!("cannot open a window ({e:?}); is DISPLAY set? (megaray serve shows the view in a browser)")
         })?;
     // minifb sleeps in each update until 4 ms have passed since the last; the loop updates
     // twice a frame (input, then the picture), so that would cost each frame up to 4 ms. The

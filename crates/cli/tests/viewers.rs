@@ -142,6 +142,15 @@ fn display() -> Display {
         let xvfb = Proc(child);
         let sock = format!("/tmp/.X11-unix/X{n}");
         wait_until("Xvfb", 20, || Path::new(&sock).exists());
+        // The socket comes before the server answers: wait until it does.
+        let answers = || {
+            Command::new("xdotool")
+                .env("DISPLAY", &name)
+                .arg("getdisplaygeometry")
+                .output()
+                .is_ok_and(|o| o.status.success())
+        };
+        wait_until("Xvfb to answer", 20, answers);
         return Display { name, _xvfb: xvfb };
     }
     panic!("no free X display number");
@@ -199,6 +208,11 @@ fn the_window_opens_draws_reacts_saves_and_quits() {
     let mut view = Proc(child);
     let mut id = String::new();
     wait_until("the window", 90, || {
+        if let Ok(Some(status)) = view.0.try_wait() {
+            let mut err = String::new();
+            view.0.stderr.take().unwrap().read_to_string(&mut err).unwrap();
+            panic!("megaray view ended ({status}) before its window appeared: {err}");
+        }
         id = xdotool(&d, &["search", "--name", "megaray - plant.mray"]);
         !id.is_empty()
     });
