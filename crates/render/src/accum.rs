@@ -17,7 +17,6 @@ use crate::frame::{render_frame, Frame, Renderer};
 use crate::image_out::{Aovs, Image};
 use crate::region::Piece;
 use crate::tiled::TileLayout;
-use crate::TILE;
 
 /// Running sums of frames: per pixel the colour sum and the sum of squared luminance (for
 /// the error estimate), and the AOV sums. Every per-pixel buffer is stored tile by tile
@@ -177,31 +176,22 @@ impl Accumulator {
             .zip(counts.par_chunks_mut(band).zip(provisional.par_chunks_mut(band)))
             .enumerate()
             .for_each(|(b, ((sum, lum_sq), (counts, provisional)))| {
-                let (base, y0) = (b * band, b as u32 * TILE);
                 let all_plain = plain && !provisional.contains(&true);
-                let rows = (sum.len() / layout.w as usize) as u32;
-                // Tile by tile, its rows in turn: the sums are written as one stream, the
-                // frame's band read from the cache.
-                for x0 in (0..layout.w).step_by(TILE as usize) {
-                    for y in y0..y0 + rows {
-                        let tw = layout.tile_w(x0) as usize;
-                        let s = layout.tile_start(x0, y0) - base + (y - y0) as usize * tw;
-                        let i = (y * layout.w + x0) as usize;
-                        let (sum, lum_sq) = (&mut sum[s..s + tw], &mut lum_sq[s..s + tw]);
-                        let (counts, provisional) = (&mut counts[s..s + tw], &mut provisional[s..s + tw]);
-                        if all_plain {
-                            // Every pixel done, exactly, onto exact sums: add_sample's plain case.
-                            add_plain(sum, lum_sq, counts, &f.image.pixels[i..i + tw]);
-                            continue;
-                        }
-                        for j in 0..tw {
-                            if f.is_done(i + j) {
-                                let (p, approx) = (f.image.pixels[i + j], f.is_approx(i + j));
-                                add_sample(&mut sum[j], &mut lum_sq[j], &mut counts[j], &mut provisional[j], p, approx);
-                            }
+                layout.band_tile_runs(b, sum.len() / layout.w as usize, |s, at, n| {
+                    let i = b * band + at;
+                    let (sum, lum_sq) = (&mut sum[s..s + n], &mut lum_sq[s..s + n]);
+                    let (counts, provisional) = (&mut counts[s..s + n], &mut provisional[s..s + n]);
+                    if all_plain {
+                        // Every pixel done, exactly, onto exact sums: add_sample's plain case.
+                        return add_plain(sum, lum_sq, counts, &f.image.pixels[i..i + n]);
+                    }
+                    for j in 0..n {
+                        if f.is_done(i + j) {
+                            let (p, approx) = (f.image.pixels[i + j], f.is_approx(i + j));
+                            add_sample(&mut sum[j], &mut lum_sq[j], &mut counts[j], &mut provisional[j], p, approx);
                         }
                     }
-                }
+                });
             });
         if !f.depth.is_empty() {
             if self.frames == 0 || self.depth.is_empty() {
@@ -242,26 +232,9 @@ impl Accumulator {
     pub fn add_piece(&mut self, p: &Piece) {
         let rc = p.rect;
         assert!(rc.within(self.width, self.height), "piece {rc:?} outside the accumulator");
-        let pw = (rc.x1 - rc.x0) as usize;
         let aovs = !p.depth.is_empty() && !self.depth.is_empty();
-        // The piece's pixels in runs contiguous in the sums: a row's part in each tile it
-        // crosses, runs that follow each other merged (a piece that is a tile is one run).
-        let layout = self.layout();
-        let mut runs: Vec<(usize, usize, usize)> = Vec::new();
-        for (row, y) in (rc.y0..rc.y1).enumerate() {
-            let mut x = rc.x0;
-            while x < rc.x1 {
-                let end = ((x / TILE + 1) * TILE).min(rc.x1);
-                let (s, q, n) = (layout.index(x, y), row * pw + (x - rc.x0) as usize, (end - x) as usize);
-                match runs.last_mut() {
-                    Some(last) if last.0 + last.2 == s && last.1 + last.2 == q => last.2 += n,
-                    _ => runs.push((s, q, n)),
-                }
-                x = end;
-            }
-        }
-        for (at, q, n) in runs {
-            // A run of the piece against its place in the sums.
+        // The piece's pixels in runs contiguous in the sums (a piece that is a tile is one).
+        self.layout().rect_runs(rc, |at, q, n| {
             let (to, from) = (at..at + n, q..q + n);
             if p.approx.is_empty() && !self.provisional[to.clone()].contains(&true) {
                 // Every pixel exact, onto exact sums: add_sample's plain case, as add_frame.
@@ -288,7 +261,7 @@ impl Accumulator {
                     }
                 }
             }
-        }
+        });
         self.rays += p.rays;
     }
 

@@ -110,19 +110,7 @@ impl Renderer {
     /// A black `w` x `h` frame (AOV buffers when `aovs`), in a recycled image buffer when
     /// there is one of its size.
     fn blank_frame(&self, w: u32, h: u32, aovs: bool) -> Frame {
-        let mut pixels = std::mem::take(&mut self.spare().pixels);
-        let mut f = Frame::blank(0, 0, false);
-        if pixels.len() == (w * h) as usize {
-            pixels.fill([0.0; 3]);
-            f.image = Image { width: w, height: h, pixels };
-        } else {
-            f.image = Image::new(w, h);
-        }
-        if aovs {
-            let n = (w * h) as usize;
-            (f.depth, f.normal, f.albedo) = (vec![0.0; n], vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
-        }
-        f
+        Frame::blank_in(std::mem::take(&mut self.spare().pixels), w, h, aovs)
     }
 
     /// Lights the scene with `env` (what misses see, and the lights of every shader).
@@ -355,9 +343,21 @@ pub struct Frame {
 impl Frame {
     /// A black `w` x `h` frame, with zeroed AOV buffers when `aovs`.
     pub(crate) fn blank(w: u32, h: u32, aovs: bool) -> Frame {
+        Frame::blank_in(Vec::new(), w, h, aovs)
+    }
+
+    /// [`Frame::blank`], its image in `pixels` (zeroed) when they are `w * h`.
+    fn blank_in(mut pixels: Vec<[f32; 3]>, w: u32, h: u32, aovs: bool) -> Frame {
         let n = (w * h) as usize;
+        let image = match pixels.len() == n {
+            true => {
+                pixels.fill([0.0; 3]);
+                Image { width: w, height: h, pixels }
+            }
+            false => Image::new(w, h),
+        };
         Frame {
-            image: Image::new(w, h),
+            image,
             depth: if aovs { vec![0.0; n] } else { Vec::new() },
             normal: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },
             albedo: if aovs { vec![[0.0; 3]; n] } else { Vec::new() },

@@ -158,17 +158,8 @@ fn fill_in_core(r: &Renderer, tracer: &Tracer, frame: u32, pc: &mut Piece) {
 fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], pieces: &mut [Piece], stats: &mut JobStats) {
     let job_opts =
         |chunk| JobOptions { chunk, deadline: None, max_parked: jobs::MAX_PARKED, stand_in: r.settings.stand_in };
-    // Each piece's cost: nanoseconds of its jobs, summed over the threads that ran them,
-    // from one job in `every` (a clock read costs a tenth of a small job) times `every`.
+    // Each piece's cost: nanoseconds of its jobs, summed over the threads that ran them.
     let nanos: Vec<AtomicU64> = rects.iter().map(|_| AtomicU64::new(0)).collect();
-    let timed = |k: usize, every: usize, p: u32, job: &mut dyn FnMut()| {
-        if !k.is_multiple_of(every) {
-            return job();
-        }
-        let t = Instant::now();
-        job();
-        nanos[p as usize].fetch_add(t.elapsed().as_nanos() as u64 * every as u64, Ordering::Relaxed);
-    };
     if r.settings.aovs {
         // A pixel a job: (piece, index in it).
         let order: Vec<(u32, u32)> =
@@ -177,9 +168,8 @@ fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], piece
             let (p, i) = order[k];
             let rc = rects[p as usize];
             let w = rc.x1 - rc.x0;
-            let mut out = None;
-            timed(k, 16, p, &mut || out = Some(r.pixel(rc.x0 + i % w, rc.y0 + i / w, frame, caster)));
-            out.expect("the job ran").map(|s| (s, caster.take_approx()))
+            timed(&nanos[p as usize], k, 16, || r.pixel(rc.x0 + i % w, rc.y0 + i / w, frame, caster))
+                .map(|s| (s, caster.take_approx()))
         });
         *stats = run.stats;
         for (k, (s, apx)) in run.into_finished() {
@@ -206,9 +196,7 @@ fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], piece
             }
         }
         let run = jobs::run(tracer, groups.len(), &job_opts(8), |k, caster| {
-            let mut out = None;
-            timed(k, 4, groups[k].0, &mut || out = Some(r.group(groups[k].1, frame, caster)));
-            out.expect("the job ran")
+            timed(&nanos[groups[k].0 as usize], k, 4, || r.group(groups[k].1, frame, caster))
         });
         *stats = run.stats;
         for (k, out) in run.into_finished() {
@@ -228,6 +216,18 @@ fn render_paged(r: &Renderer, tracer: &Tracer, frame: u32, rects: &[Rect], piece
     for (pc, n) in pieces.iter_mut().zip(&nanos) {
         pc.secs = n.load(Ordering::Relaxed) as f32 * 1e-9;
     }
+}
+
+/// Job `k`'s result; one job in `every` is timed (a clock read costs a tenth of a small job)
+/// and `every` times its nanoseconds added to `cost`.
+fn timed<R>(cost: &AtomicU64, k: usize, every: usize, job: impl FnOnce() -> R) -> R {
+    if !k.is_multiple_of(every) {
+        return job();
+    }
+    let t = Instant::now();
+    let out = job();
+    cost.fetch_add(t.elapsed().as_nanos() as u64 * every as u64, Ordering::Relaxed);
+    out
 }
 
 impl Frame {

@@ -5,6 +5,7 @@
 use rayon::prelude::*;
 
 use crate::frame::TILE;
+use crate::Rect;
 
 /// Where pixel (x, y) of a `w` x `h` frame is stored: the [`TILE`] x [`TILE`] tiles in rows
 /// of tiles (as [`crate::Rect::tiles`], edge tiles cut), each tile row-major within itself.
@@ -61,6 +62,40 @@ impl TileLayout {
         }
     }
 
+    /// Calls `f(stored, in_band, n)` for the runs of band `b` (rows `b * TILE` on, `rows` of
+    /// them) tile by tile, each tile's rows in turn: `stored` counts from the band's first
+    /// stored pixel, `in_band` is row-major from the band's first pixel. Tile by tile, the
+    /// stored side is one stream and the row-major side stays in the cache.
+    pub fn band_tile_runs(&self, b: usize, rows: usize, mut f: impl FnMut(usize, usize, usize)) {
+        let (y0, base) = (b as u32 * TILE, b * self.band());
+        for x0 in (0..self.w).step_by(TILE as usize) {
+            let (tw, start) = (self.tile_w(x0) as usize, self.tile_start(x0, y0) - base);
+            for r in 0..rows {
+                f(start + r * tw, r * self.w as usize + x0 as usize, tw);
+            }
+        }
+    }
+
+    /// Calls `f(stored, local, n)` for runs covering rectangle `rc`, whose pixels are numbered
+    /// row-major within it (`local`): one run if `rc` is a whole tile, else a row's part in
+    /// each tile it crosses.
+    pub fn rect_runs(&self, rc: Rect, mut f: impl FnMut(usize, usize, usize)) {
+        let (x0, y0) = (rc.x0 / TILE * TILE, rc.y0 / TILE * TILE);
+        let whole = rc.x0 == x0 && rc.y0 == y0 && rc.x1 == x0 + self.tile_w(x0) && rc.y1 == (y0 + TILE).min(self.h);
+        if whole {
+            return f(self.tile_start(x0, y0), 0, rc.area());
+        }
+        let pw = (rc.x1 - rc.x0) as usize;
+        for (row, y) in (rc.y0..rc.y1).enumerate() {
+            let mut x = rc.x0;
+            while x < rc.x1 {
+                let end = ((x / TILE + 1) * TILE).min(rc.x1);
+                f(self.index(x, y), row * pw + (x - rc.x0) as usize, (end - x) as usize);
+                x = end;
+            }
+        }
+    }
+
     /// A row-major buffer of `f(stored index)` for every pixel, band by band on the current
     /// thread pool.
     pub fn gather<T: Send + Clone + Default>(&self, f: impl Fn(usize) -> T + Sync) -> Vec<T> {
@@ -75,16 +110,8 @@ impl TileLayout {
             return out;
         }
         out.par_chunks_mut(self.band()).enumerate().for_each(|(b, band)| {
-            let y0 = b as u32 * TILE;
-            let rows = band.len() / self.w as usize;
-            // Tile by tile: the stored values read as one stream, the band written in the cache.
-            for x0 in (0..self.w).step_by(TILE as usize) {
-                let (tw, start) = (self.tile_w(x0) as usize, self.tile_start(x0, y0));
-                for r in 0..rows {
-                    let at = r * self.w as usize + x0 as usize;
-                    f(&mut band[at..at + tw], start + r * tw);
-                }
-            }
+            let (base, rows) = (b * self.band(), band.len() / self.w as usize);
+            self.band_tile_runs(b, rows, |s, at, n| f(&mut band[at..at + n], base + s));
         });
         out
     }
@@ -100,7 +127,6 @@ impl TileLayout {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Rect;
 
     #[test]
     fn every_pixel_has_one_place_and_a_tile_is_one_block() {

@@ -11,16 +11,26 @@ use megaray_render::*;
 use megaray_scene::Scene;
 use megaray_trace::Tracer;
 
+/// The balls scene in `dir`, a camera on it 75 x 41 (not a multiple of the tile edge, so
+/// that edge tiles are cut), and a pager over it with little room.
+fn balls(dir: &std::path::Path) -> (Scene, Camera, Pager) {
+    let path = common::balls(dir, 48, 16);
+    let scene = Scene::open(&path).unwrap();
+    let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, 75, 41);
+    let pager =
+        Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 256 * 1024, fetchers: 2 }).unwrap();
+    (scene, cam, pager)
+}
+
+fn bits(f: &Frame) -> Vec<u32> {
+    f.image.pixels.iter().flatten().map(|v| v.to_bits()).collect()
+}
+
 #[test]
 fn pieces_put_together_equal_the_whole_frame() {
     let dir = tempfile::tempdir().unwrap();
-    let path = common::balls(dir.path(), 48, 16);
-    let scene = Scene::open(&path).unwrap();
-    // Not a multiple of the tile edge, so that edge tiles are cut.
-    let (w, h) = (75, 41);
-    let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, w, h);
-    let pager =
-        Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 256 * 1024, fetchers: 2 }).unwrap();
+    let (scene, cam, pager) = balls(dir.path());
+    let (w, h) = (cam.width, cam.height);
     for aovs in [false, true] {
         for spp in [1, 3] {
             let mut s = RenderSettings::new(cam);
@@ -48,7 +58,6 @@ fn pieces_put_together_equal_the_whole_frame() {
                     }
                 }
                 assert!(secs > 0.0, "no piece measured its cost");
-                let bits = |f: &Frame| f.image.pixels.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
                 assert_eq!(bits(&f), bits(&whole), "aovs {aovs} spp {spp} paged {}", tracer.pager().is_some());
                 assert_eq!(f.rays, whole.rays);
                 if aovs {
@@ -66,12 +75,7 @@ fn pieces_put_together_equal_the_whole_frame() {
 #[test]
 fn recycled_buffers_give_the_same_frames() {
     let dir = tempfile::tempdir().unwrap();
-    let path = common::balls(dir.path(), 48, 16);
-    let scene = Scene::open(&path).unwrap();
-    let cam = Camera::look_at(Vec3::new(3.0, 3.0, 5.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y, 45.0, 75, 41);
-    let pager =
-        Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 256 * 1024, fetchers: 2 }).unwrap();
-    let bits = |f: &Frame| f.image.pixels.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let (scene, cam, pager) = balls(dir.path());
     for tracer in [Tracer::new(&scene), Tracer::paged(&pager)] {
         let r = Renderer::new(RenderSettings::new(cam), &scene.header().bounds);
         let fresh = render_frame(&r, &tracer, 5);

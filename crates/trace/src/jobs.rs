@@ -398,7 +398,6 @@ where
             Some(b) => std::mem::take(&mut *b.lock().unwrap_or_else(|p| p.into_inner())),
             None => Vec::new(),
         };
-        out.clear();
         out.reserve(n / threads + chunk);
         let mut to_park: Vec<(u32, Parked)> = Vec::new();
         let mut seen_arrivals = u64::MAX;
