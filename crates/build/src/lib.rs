@@ -91,6 +91,9 @@ pub struct BuildOptions {
     pub lod: Option<lod::LodOptions>,
     /// Where temporary files go (a folder is made in it); `None`: the output's folder.
     pub tmp_dir: Option<PathBuf>,
+    /// Write a compact scene file (tiles stored in the compact codec, about half the bytes;
+    /// decoded as they load: `megaray_scene::compact`). `false`: tiles stored as traced.
+    pub compact: bool,
     /// Set it from another thread (a Ctrl-C handler) to stop the build; it then returns
     /// [`BuildError::Cancelled`] and removes its temporary files.
     pub cancel: Arc<AtomicBool>,
@@ -108,6 +111,7 @@ impl Default for BuildOptions {
             quality: Quality::High,
             lod: Some(lod::LodOptions::default()),
             tmp_dir: None,
+            compact: true,
             cancel: Arc::new(AtomicBool::new(false)),
         }
     }
@@ -348,6 +352,7 @@ pub fn build_objects(
     let lod_capacity = opts.lod.map_or(0, |l| l.max_levels as u32) * parts.len() as u32;
     let mut writer =
         SceneWriter::create(out, top_nodes, top_depth, parts.len() as u32, lod_capacity, opts.tile_target)?;
+    writer.set_compact(opts.compact);
     if let Some(i) = instancing.clone() {
         writer.set_instancing(i);
     }

@@ -151,9 +151,13 @@ pub struct BuildArgs {
     no_lod: bool,
     /// Where temporary files go (default: beside the output). They peak at about 36 bytes a
     /// triangle (72 where holes cannot be punched in files as they are read; more with
-    /// attributes); the scene file takes about 46-55.
+    /// attributes); the scene file takes about 20-25 (46-55 with --plain).
     #[arg(long, value_name = "DIR")]
     tmp: Option<PathBuf>,
+    /// Store tiles as they are traced instead of compact (about twice the bytes; nothing to
+    /// decode as they load). Both kinds of file render the same.
+    #[arg(long)]
+    plain: bool,
     /// Print the build summary as one JSON object.
     #[arg(long)]
     json: bool,
@@ -173,6 +177,7 @@ pub fn build(a: BuildArgs, bars: &dyn Progress) -> Result<()> {
         },
         lod: if a.no_lod { None } else { BuildOptions::default().lod },
         tmp_dir: a.tmp.clone(),
+        compact: !a.plain,
         ..BuildOptions::default()
     };
     let cancel = opts.cancel.clone();
@@ -851,6 +856,7 @@ pub(crate) fn build_into(inputs: Vec<PathBuf>, out: &Path, build_mem: u64, bars:
             quality: QualityArg::High,
             no_lod: false,
             tmp: None,
+            plain: false,
             json: false,
         },
         bars,

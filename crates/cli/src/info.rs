@@ -29,7 +29,9 @@ pub struct InfoArgs {
 }
 
 pub fn info(a: InfoArgs) -> Result<()> {
-    let scene = Scene::open(&a.scene)?;
+    // Walking trees and checking tiles read them: in core. Otherwise the tables suffice
+    // (a compact file is then not decoded).
+    let scene = if a.verify || a.tree { Scene::open(&a.scene)? } else { Scene::open_owned(&a.scene)? };
     if a.verify {
         scene.verify_all()?;
     }
@@ -38,28 +40,15 @@ pub fn info(a: InfoArgs) -> Result<()> {
     let full = scene.full_part_count();
     let parts = &scene.parts()[..full as usize];
     let tiles: Vec<_> = scene.tiles().iter().filter(|t| t.part < full).copied().collect();
-    let lod_bytes = scene.lod_bytes();
+    let stored = scene.stored_bytes();
+    let lod_bytes = stored.lod;
     let lod_errors: Vec<f32> = scene.parts()[full as usize..].iter().map(|p| p.lod_error).collect();
     let lod_levels = parts.iter().enumerate().map(|(i, _)| scene.lod_chain(i as u32).count() - 1).max().unwrap_or(0);
     let n = h.tri_count.max(1) as f64;
-    let node_bytes: u64 = tiles.iter().map(|t| t.node_count as u64 * megaray_scene::format::NODE_BYTES as u64).sum();
-    let tri_bytes: u64 = tiles.iter().map(|t| t.blocks as u64 * 144).sum();
+    let (node_bytes, tri_bytes, padding) = (stored.nodes, stored.triangles, stored.padding);
     let slots: u64 = parts.iter().map(|p| p.slot_count).sum();
     let fill = h.tri_count as f64 / slots.max(1) as f64;
-    let tile_total: u64 = parts.iter().map(|p| p.tile_bytes).sum();
-    let padding = tile_total - node_bytes - tri_bytes;
-    let attr_bytes: u64 = parts
-        .iter()
-        .map(|p| {
-            let t = p.slot_count;
-            [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)]
-                .iter()
-                .filter(|(o, _)| *o != 0)
-                .map(|(_, s)| (t * s).div_ceil(4096) * 4096)
-                .sum::<u64>()
-        })
-        .sum();
-    let meta = h.file_bytes - tile_total - attr_bytes - lod_bytes;
+    let (attr_bytes, meta) = (stored.attributes, stored.tables);
     let depths: Vec<u32> = parts.iter().map(|p| p.depth).collect();
     let (dmin, dmax) = (depths.iter().min().copied().unwrap_or(0), depths.iter().max().copied().unwrap_or(0));
     let tile_sizes: Vec<u32> = tiles.iter().map(|t| t.bytes).collect();
@@ -77,6 +66,7 @@ pub fn info(a: InfoArgs) -> Result<()> {
             "{}",
             serde_json::json!({
                 "file": a.scene, "format_version": h.version, "file_bytes": h.file_bytes,
+                "compact": h.is_compact(), "image_bytes": h.image_len(),
                 "triangles": h.tri_count, "degenerate_dropped": h.degenerate_dropped,
                 "bounds": {"min": h.bounds.min, "max": h.bounds.max},
                 "parts": full, "tiles": tiles.len(), "tile_target": h.tile_target,
@@ -144,7 +134,15 @@ pub fn info(a: InfoArgs) -> Result<()> {
             h.instances_bytes as f64 / i.instances.len().max(1) as f64
         );
     }
-    println!("  file             {} = {:.1} bytes/triangle:", format_size(h.file_bytes), h.file_bytes as f64 / n);
+    let kind = match h.is_compact() {
+        true => format!("compact, {} once loaded", format_size(h.image_len())),
+        false => "plain".to_string(),
+    };
+    println!(
+        "  file             {} = {:.1} bytes/triangle ({kind}):",
+        format_size(h.file_bytes),
+        h.file_bytes as f64 / n
+    );
     println!("    nodes          {:.1}", node_bytes as f64 / n);
     println!("    triangles      {:.1} (blocks of 4, {:.0}% of lanes used)", tri_bytes as f64 / n, 100.0 * fill);
     println!("    tile padding   {:.1}", padding as f64 / n);

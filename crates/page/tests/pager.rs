@@ -87,9 +87,9 @@ fn damaged_and_truncated_files_are_reported() {
     let path = scene_file(dir.path());
     let probe = Scene::open(&path).unwrap();
     let t = probe.tiles().len() as u32 / 2;
-    let off = probe.tiles()[t as usize].offset + 200;
+    let off = megaray_testkit::stored_offset(&probe, probe.tiles()[t as usize].offset + 200);
     let last = probe.tiles().len() as u32 - 1;
-    let last_off = probe.tiles()[last as usize].offset;
+    let last_off = megaray_testkit::stored_offset(&probe, probe.tiles()[last as usize].offset);
     drop(probe);
     let mut bytes = std::fs::read(&path).unwrap();
     bytes[off as usize] ^= 0x40;

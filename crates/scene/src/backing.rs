@@ -9,7 +9,12 @@
 //!   (2 MiB when the file was read before through another map), past any budget. A file
 //!   truncated under the process makes a read fail with an error, not a `SIGBUS`.
 //!
-//! The same file offsets address both, so the tracer reads either through one slice.
+//! - [`Backing::Image`]: a compact file's image (`compact.rs`) decoded whole into a region,
+//!   for scenes traced in core.
+//!
+//! The same offsets address all three, so the tracer reads any through one slice. A region
+//! of a compact file maps image offsets to the file through its extents: plain runs are
+//! read as they are, tiles read and decoded.
 //! Ranges loaded into an owned region may share their first and last pages with a
 //! neighbour's range (a tile's attributes are not page aligned): those pages are counted
 //! (`shared`) and read once, released when the last range holding them is released.
@@ -22,11 +27,13 @@ use std::sync::Mutex;
 
 use memmap2::Mmap;
 
-use crate::format::PAGE;
+use crate::compact::{self, TilePlace};
+use crate::format::{Extent, EXTENT_TILE, PAGE};
 
 pub(crate) enum Backing {
     Mapped(Mmap),
     Owned(Region),
+    Image(Region),
 }
 
 impl Backing {
@@ -34,7 +41,15 @@ impl Backing {
     pub(crate) fn bytes(&self) -> &[u8] {
         match self {
             Backing::Mapped(m) => m,
-            Backing::Owned(r) => r.bytes(),
+            Backing::Owned(r) | Backing::Image(r) => r.bytes(),
+        }
+    }
+
+    /// A compact file's extents; empty for a file that is its own image.
+    pub(crate) fn extents(&self) -> &[Extent] {
+        match self {
+            Backing::Mapped(_) => &[],
+            Backing::Owned(r) | Backing::Image(r) => &r.extents,
         }
     }
 }
@@ -48,7 +63,22 @@ pub(crate) struct Region {
     file: File,
     /// Pages only partly covered by a loaded range, and how many loaded ranges hold each.
     shared: Mutex<HashMap<u64, u32>>,
+    /// A compact file's extents, in image order (checked by the reader); empty when the
+    /// file is its own image.
+    extents: Vec<Extent>,
+    /// This region's number, for the decoded-tile cache ([`Region::decoded`]).
+    id: u64,
 }
+
+/// The tile a thread decoded last, `(region id, extent index, bytes)`: a tile load reads its
+/// last, partly covered page apart from its whole pages, and decodes the tile once for both.
+type Decoded = std::cell::RefCell<(u64, usize, Vec<u8>)>;
+
+thread_local! {
+    static DECODED: Decoded = const { std::cell::RefCell::new((0, 0, Vec::new())) };
+}
+
+static REGIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 // SAFETY: the region is plain memory owned by this struct. Bytes are written only by
 // `load` (through the kernel, `pread`) into pages no reader may be reading: pages counted in
@@ -60,8 +90,11 @@ unsafe impl Sync for Region {}
 
 impl Region {
     /// Reserves address space for `file` of `len` bytes (nothing resident yet: every page
-    /// reads as zero until loaded).
-    pub(crate) fn new(file: File, len: u64) -> io::Result<Region> {
+    /// reads as zero until loaded). With `extents`, `len` is a compact file's image length
+    /// and loads go through the extents; `huge` asks for 2 MiB pages (a region loaded whole
+    /// and traced in core) rather than 4 KiB ones (a pager's, whose resident memory is
+    /// what it loaded).
+    pub(crate) fn new(file: File, len: u64, extents: Vec<Extent>, huge: bool) -> io::Result<Region> {
         let len = usize::try_from(len).map_err(|_| io::Error::other("file larger than the address space"))?;
         let mapped = len.div_ceil(PAGE as usize).max(1) * PAGE as usize;
         // SAFETY: a fresh anonymous private mapping at an address of the kernel's choice;
@@ -85,7 +118,7 @@ impl Region {
         #[cfg(target_os = "linux")]
         // SAFETY: advice on the mapping just made.
         unsafe {
-            libc::madvise(ptr, mapped, libc::MADV_NOHUGEPAGE);
+            libc::madvise(ptr, mapped, if huge { libc::MADV_HUGEPAGE } else { libc::MADV_NOHUGEPAGE });
         }
         // Reads fetch exactly the ranges asked for: no read-ahead around them (a pager's
         // tiles are scattered over the file, and read-ahead would read what it never asked).
@@ -94,7 +127,8 @@ impl Region {
         unsafe {
             libc::posix_fadvise(file.as_raw_fd(), 0, 0, libc::POSIX_FADV_NORMAL);
         }
-        Ok(Region { ptr: ptr.cast(), len, mapped, file, shared: Mutex::new(HashMap::new()) })
+        let id = REGIONS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        Ok(Region { ptr: ptr.cast(), len, mapped, file, shared: Mutex::new(HashMap::new()), extents, id })
     }
 
     #[inline(always)]
@@ -132,6 +166,16 @@ impl Region {
     /// WILLNEED), so that a [`Region::load`] of them soon after waits less: a pager asks so
     /// for every tile it queues, which keeps many reads in flight.
     pub(crate) fn prefetch(&self, off: u64, len: u64) {
+        if self.extents.is_empty() {
+            self.advise_will_need(off, len);
+            return;
+        }
+        for e in self.extents_in(off, off.saturating_add(len)) {
+            self.advise_will_need(e.stored_off, e.stored_len);
+        }
+    }
+
+    fn advise_will_need(&self, off: u64, len: u64) {
         #[cfg(target_os = "linux")]
         // SAFETY: advice on a file descriptor `self.file` keeps open; it reads no memory.
         unsafe {
@@ -142,6 +186,36 @@ impl Region {
                 libc::POSIX_FADV_WILLNEED,
             );
         }
+    }
+
+    /// The extents that overlap image bytes `from..to`.
+    fn extents_in(&self, from: u64, to: u64) -> &[Extent] {
+        let first = self.extents.partition_point(|e| e.image_off + e.image_len <= from);
+        let last = self.extents.partition_point(|e| e.image_off < to);
+        &self.extents[first..last.max(first)]
+    }
+
+    /// Loads the whole image (a compact file opened in core), on `threads` threads, before
+    /// anyone reads it.
+    pub(crate) fn load_all(&self, threads: usize) -> io::Result<()> {
+        let n = self.extents.len();
+        let threads = threads.clamp(1, n.max(1));
+        std::thread::scope(|s| {
+            let jobs: Vec<_> = (0..threads)
+                .map(|t| {
+                    s.spawn(move || -> io::Result<()> {
+                        // Whole extents, every `threads`-th: no page is written by two
+                        // threads but a page two extents share, which `read` writes only
+                        // within each extent's own bytes.
+                        for e in self.extents.iter().skip(t).step_by(threads) {
+                            self.read(e.image_off as usize, e.image_len as usize)?;
+                        }
+                        Ok(())
+                    })
+                })
+                .collect();
+            jobs.into_iter().try_for_each(|j| j.join().unwrap_or_else(|_| Err(io::Error::other("a loader panicked"))))
+        })
     }
 
     /// Releases what [`Region::load`] loaded for the same range: its whole pages now, its
@@ -213,11 +287,88 @@ impl Region {
         }
     }
 
-    /// Reads `n` bytes of the file at `at` into the same offset of the region.
+    /// Reads image bytes `at..at + n` into the region: the file's bytes at the same offset,
+    /// or, for a compact file, what its extents give.
     fn read(&self, at: usize, n: usize) -> io::Result<()> {
         let n = n.min(self.len.saturating_sub(at));
-        // Fault the destination's pages in with one call rather than one trap per page
-        // during the copy. (Advice: a kernel before 5.14 refuses it, and the copy faults.)
+        self.populate(at, n);
+        if self.extents.is_empty() {
+            return self.pread(at, n, at as u64);
+        }
+        self.read_image(at, n)
+    }
+
+    /// [`Region::read`] through the extents (image bytes no extent covers stay as they are:
+    /// zero, as the pages being read are not loaded). A stored tile that does not decode
+    /// reads as zeros: its checksum then fails when it is checked, as a damaged plain
+    /// tile's does. Only reading the file can fail.
+    fn read_image(&self, at: usize, n: usize) -> io::Result<()> {
+        let (from, to) = (at as u64, (at + n) as u64);
+        for (k, e) in self.extents_in(from, to).iter().enumerate() {
+            let (lo, hi) = (from.max(e.image_off), to.min(e.image_off + e.image_len));
+            if e.kind != EXTENT_TILE {
+                self.pread(lo as usize, (hi - lo) as usize, e.stored_off + (lo - e.image_off))?;
+                continue;
+            }
+            let k = k + self.extents.partition_point(|x| x.image_off + x.image_len <= from);
+            if lo == e.image_off && hi == e.image_off + e.image_len {
+                let stored = self.stored(e)?;
+                // SAFETY: the destination lies inside the mapping, and no reader reads it
+                // until the load is published (see the `Sync` note).
+                let out = unsafe { std::slice::from_raw_parts_mut(self.ptr.add(lo as usize), (hi - lo) as usize) };
+                let place = TilePlace::at(e.image_off, compact::stored_counts(&stored).map_or(0, |c| c.0));
+                if compact::decode(&stored, out, place).is_err() {
+                    out.fill(0);
+                }
+                continue;
+            }
+            self.decoded(k, e, |tile| {
+                let part = &tile[(lo - e.image_off) as usize..(hi - e.image_off) as usize];
+                // SAFETY: as above.
+                unsafe { std::ptr::copy_nonoverlapping(part.as_ptr(), self.ptr.add(lo as usize), part.len()) };
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Calls `f` with extent `k`'s decoded tile, decoded once for consecutive asks on a thread.
+    fn decoded(&self, k: usize, e: &Extent, f: impl FnOnce(&[u8])) -> io::Result<()> {
+        DECODED.with(|d| {
+            let mut d = d.borrow_mut();
+            if d.0 != self.id || d.1 != k || d.2.len() != e.image_len as usize {
+                let stored = self.stored(e)?;
+                let mut tile = std::mem::take(&mut d.2);
+                tile.clear();
+                tile.resize(e.image_len as usize, 0);
+                let place = TilePlace::at(e.image_off, compact::stored_counts(&stored).map_or(0, |c| c.0));
+                if compact::decode(&stored, &mut tile, place).is_err() {
+                    tile.fill(0);
+                }
+                *d = (self.id, k, tile);
+            }
+            f(&d.2);
+            Ok(())
+        })
+    }
+
+    /// The stored bytes of extent `e`.
+    fn stored(&self, e: &Extent) -> io::Result<Vec<u8>> {
+        let mut buf = vec![0u8; e.stored_len as usize];
+        let mut done = 0;
+        while done < buf.len() {
+            match std::os::unix::fs::FileExt::read_at(&self.file, &mut buf[done..], e.stored_off + done as u64) {
+                Ok(0) => return Err(truncated(e.stored_off + e.stored_len)),
+                Ok(got) => done += got,
+                Err(x) if x.kind() == io::ErrorKind::Interrupted => {}
+                Err(x) => return Err(x),
+            }
+        }
+        Ok(buf)
+    }
+
+    /// Faults the region's pages `at..at + n` in with one call rather than one trap per
+    /// page during the copy. (Advice: a kernel before 5.14 refuses it, and the copy faults.)
+    fn populate(&self, at: usize, n: usize) {
         #[cfg(target_os = "linux")]
         // SAFETY: the pages lie inside the mapping and are written by nobody else now.
         unsafe {
@@ -228,12 +379,21 @@ impl Region {
                 libc::MADV_POPULATE_WRITE,
             );
         }
+    }
+
+    /// Reads `n` bytes of the file at `from` into the region at `at`.
+    fn pread(&self, at: usize, n: usize, from: u64) -> io::Result<()> {
         let mut done = 0;
         while done < n {
             // SAFETY: the destination `at + done .. at + n` lies inside the mapping, and no
             // reader reads it until the load is published (see the `Sync` note).
             let got = unsafe {
-                libc::pread(self.file.as_raw_fd(), self.ptr.add(at + done).cast(), n - done, (at + done) as libc::off_t)
+                libc::pread(
+                    self.file.as_raw_fd(),
+                    self.ptr.add(at + done).cast(),
+                    n - done,
+                    (from + done as u64) as libc::off_t,
+                )
             };
             if got < 0 {
                 let e = io::Error::last_os_error();
@@ -243,15 +403,16 @@ impl Region {
                 return Err(e);
             }
             if got == 0 {
-                return Err(io::Error::new(
-                    io::ErrorKind::UnexpectedEof,
-                    format!("the file ends before byte {} (truncated while open?)", at + n),
-                ));
+                return Err(truncated(from + n as u64));
             }
             done += got as usize;
         }
         Ok(())
     }
+}
+
+fn truncated(end: u64) -> io::Error {
+    io::Error::new(io::ErrorKind::UnexpectedEof, format!("the file ends before byte {end} (truncated while open?)"))
 }
 
 impl Drop for Region {
@@ -287,7 +448,7 @@ mod tests {
         let mut f = tempfile::NamedTempFile::new().unwrap();
         f.write_all(&data).unwrap();
         let path = f.into_temp_path();
-        let r = Region::new(File::open(&path).unwrap(), len as u64).unwrap();
+        let r = Region::new(File::open(&path).unwrap(), len as u64, Vec::new(), false).unwrap();
         (path, r, data)
     }
 

@@ -10,9 +10,9 @@ use megaray_base::Aabb;
 /// The first eight bytes of every scene file.
 pub const MAGIC: [u8; 8] = *b"MRAYSCN\x1a";
 /// The format version this code writes and reads.
-pub const VERSION: u32 = 7;
-/// The oldest version this code reads: version 5 is version 6 without instances, and 6 is 7
-/// without components (their fields were reserved zeros).
+pub const VERSION: u32 = 8;
+/// The oldest version this code reads: version 5 is version 6 without instances, 6 is 7
+/// without components, and 7 is 8 never compact (their fields were reserved zeros).
 pub const MIN_VERSION: u32 = 5;
 /// Page size: tiles and sections start on multiples of it.
 pub const PAGE: u64 = 4096;
@@ -62,7 +62,10 @@ pub const ATTR_MATERIAL: u32 = 8;
 /// | 200..208 | `components_bytes` |
 /// | 208..212 | `component_count` |
 /// | 212..216 | `component_run_count` |
-/// | 216..248 | reserved, zero |
+/// | 216..224 | `image_bytes`: 0 for a file that is its own image; else the file is *compact* (`compact.rs`): every offset above, and every reference, is a position in an image of this many bytes, which the [`Extent`] table maps onto the file |
+/// | 224..232 | `extents_off`: file offset of the extent table (8-aligned), or 0 |
+/// | 232..240 | `extent_count` |
+/// | 240..248 | `extents_checksum`: XXH3-64 of the extent table |
 /// | 248..256 | `header_checksum`: XXH3-64 of bytes 0..248 |
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -100,10 +103,57 @@ pub struct Header {
     pub components_bytes: u64,
     pub component_count: u32,
     pub component_run_count: u32,
-    pub reserved: [u64; 4],
+    pub image_bytes: u64,
+    pub extents_off: u64,
+    pub extent_count: u64,
+    pub extents_checksum: u64,
     pub header_checksum: u64,
 }
 const _: () = assert!(std::mem::size_of::<Header>() == 256);
+
+impl Header {
+    /// Whether the file is compact: its image ([`Header::image_len`]) differs from its bytes.
+    pub fn is_compact(&self) -> bool {
+        self.version >= 8 && self.image_bytes != 0
+    }
+
+    /// The length of the scene's image, where every offset of the tables points.
+    pub fn image_len(&self) -> u64 {
+        if self.is_compact() {
+            self.image_bytes
+        } else {
+            self.file_bytes
+        }
+    }
+}
+
+/// An extent kind: the image's bytes stored as they are.
+pub const EXTENT_RAW: u32 = 0;
+/// An extent kind: a tile stored by the compact tile codec (`compact.rs`).
+pub const EXTENT_TILE: u32 = 1;
+
+/// One run of a compact file's image and where its bytes are stored. 40 bytes. The table
+/// lists extents in image order, none overlapping; image bytes no extent covers are zero.
+///
+/// | bytes | field |
+/// |---|---|
+/// | 0..8 | `image_off` |
+/// | 8..16 | `image_len` |
+/// | 16..24 | `stored_off`: file offset of the stored bytes |
+/// | 24..32 | `stored_len` (equal to `image_len` for [`EXTENT_RAW`]) |
+/// | 32..36 | `kind`: [`EXTENT_RAW`] or [`EXTENT_TILE`] |
+/// | 36..40 | reserved, zero |
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Extent {
+    pub image_off: u64,
+    pub image_len: u64,
+    pub stored_off: u64,
+    pub stored_len: u64,
+    pub kind: u32,
+    pub reserved: u32,
+}
+const _: () = assert!(std::mem::size_of::<Extent>() == 40);
 
 /// Children per BVH node.
 pub const NODE_WIDTH: usize = 8;
@@ -342,8 +392,10 @@ pub struct TileEntry {
     pub part: u32,
     /// Number (within the part) of the tile's first triangle slot (4 per block).
     pub first_slot: u32,
-    pub reserved: u32,
-    /// XXH3-64 of the tile's `bytes` bytes.
+    /// In a compact file, the bytes its nodes take as stored (`compact.rs`; for `info`);
+    /// otherwise 0.
+    pub stored_node_bytes: u32,
+    /// XXH3-64 of the tile's `bytes` bytes (as decoded, in a compact file).
     pub checksum: u64,
 }
 const _: () = assert!(std::mem::size_of::<TileEntry>() == 40);

@@ -21,7 +21,10 @@
 //! - [`Scene::open`] maps a file and checks every table into a typed [`SceneError`];
 //!   tiles are checked (checksum, references) the first time they are used;
 //! - [`Scene::open_owned`] reads only the tables, into anonymous memory, for a pager that
-//!   then reads tiles in and drops them ([`Scene::load`], [`Scene::release`]).
+//!   then reads tiles in and drops them ([`Scene::load`], [`Scene::release`]);
+//! - a *compact* file ([`compact`]) stores its tiles in fewer bytes and an extent table
+//!   that maps them back: readers see its *image*, the bytes of the same scene stored
+//!   plainly, decoded into anonymous memory as tiles load (whole, when opened in core).
 //!
 //! ## Safety contract
 //! A mapped [`Scene`] maps its file: do not truncate or rewrite a scene file while a process
@@ -29,6 +32,7 @@
 //! owned scene reads with `pread`, so a truncated file makes a load fail with an error.
 
 mod backing;
+pub mod compact;
 pub mod components;
 pub mod error;
 pub mod format;
@@ -42,5 +46,5 @@ pub use error::{SceneError, SceneErrorKind};
 pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
 pub use instances::{Group, Instance, Instancing, Object, Target};
 pub use reader::{drop_page_cache, CheckedTiles, Scene, Tile};
-pub use stats::TreeStats;
+pub use stats::{StoredBytes, TreeStats};
 pub use writer::{BlobChild, BlobRef, MaterialDesc, PartBlob, SceneWriter, TileBlob};

@@ -31,6 +31,7 @@ const TILE_UNCHECKED: u8 = 0;
 const TILE_OK: u8 = 1;
 
 mod checked;
+mod image;
 pub use checked::CheckedTiles;
 
 const TILE_CORRUPT: u8 = 2;
@@ -202,9 +203,28 @@ impl Scene {
                 format!("too short to be a scene file ({len} bytes)"),
             ));
         }
-        let backing = if owned {
-            let r = Region::new(file, len).map_err(|e| SceneError::io(path, "reserve memory for", &e))?;
-            r.load(0, 256).map_err(|e| SceneError::io(path, "read", &e))?;
+        let mut head = [0u8; 256];
+        std::os::unix::fs::FileExt::read_exact_at(&file, &mut head, 0).map_err(|e| SceneError::io(path, "read", &e))?;
+        let header: Header = bytemuck::pod_read_unaligned(&head);
+        Scene::check_header(path, &header, &head, len)?;
+        let reserve = |e: std::io::Error| SceneError::io(path, "reserve memory for", &e);
+        let read = |e: std::io::Error| SceneError::io(path, "read", &e);
+        let backing = if header.is_compact() {
+            let extents = image::read_extents(path, &file, &header, len)?;
+            if !owned {
+                image::check_fits(path, &header)?;
+            }
+            let r = Region::new(file, header.image_bytes, extents, !owned).map_err(reserve)?;
+            if owned {
+                r.load(0, 256).map_err(read)?;
+                Backing::Owned(r)
+            } else {
+                r.load_all(std::thread::available_parallelism().map_or(1, |n| n.get())).map_err(read)?;
+                Backing::Image(r)
+            }
+        } else if owned {
+            let r = Region::new(file, len, Vec::new(), false).map_err(reserve)?;
+            r.load(0, 256).map_err(read)?;
             Backing::Owned(r)
         } else {
             // SAFETY: the map is read-only and private to this process. The contract (stated
@@ -214,36 +234,8 @@ impl Scene {
             // mapped length.
             Backing::Mapped(unsafe { Mmap::map(&file) }.map_err(|e| SceneError::io(path, "map", &e))?)
         };
-        let map = backing.bytes();
-        let header: Header = bytemuck::pod_read_unaligned(&map[..256]);
-        if header.magic != MAGIC {
-            return Err(SceneError::new(
-                path,
-                SceneErrorKind::NotAScene,
-                "not a megaray scene file (bad magic number)",
-            ));
-        }
-        if !(MIN_VERSION..=VERSION).contains(&header.version) {
-            return Err(SceneError::new(
-                path,
-                SceneErrorKind::Version,
-                format!(
-                    "scene format version {}, this megaray reads version {VERSION} (rebuild the scene)",
-                    header.version
-                ),
-            ));
-        }
-        let sum = xxhash_rust::xxh3::xxh3_64(&map[..248]);
-        if header.header_bytes != 256 || !sums_match(sum, header.header_checksum) {
-            return Err(SceneError::corrupt(path, "header checksum mismatch (the header is damaged)"));
-        }
-        if header.file_bytes != len {
-            return Err(SceneError::new(
-                path,
-                SceneErrorKind::Truncated,
-                format!("header says {} bytes but the file has {len} (truncated or appended to)", header.file_bytes),
-            ));
-        }
+        // Offsets from here on are the image's (the file's own, unless it is compact).
+        let len = header.image_len();
         let bad = |what: &str| SceneError::corrupt(path, what.to_string());
         let top = range(header.top_nodes_off, header.top_node_count as u64 * NODE_BYTES as u64, len)
             .filter(|_| header.top_nodes_off.is_multiple_of(NODE_BYTES as u64) && header.top_node_count > 0)
@@ -312,6 +304,39 @@ impl Scene {
             scene.check_disjoint()?;
         }
         Ok(scene)
+    }
+
+    /// The header's own checks: magic number, version, checksum, and the length it states.
+    fn check_header(path: &Path, header: &Header, head: &[u8; 256], len: u64) -> Result<(), SceneError> {
+        if header.magic != MAGIC {
+            return Err(SceneError::new(
+                path,
+                SceneErrorKind::NotAScene,
+                "not a megaray scene file (bad magic number)",
+            ));
+        }
+        if !(MIN_VERSION..=VERSION).contains(&header.version) {
+            return Err(SceneError::new(
+                path,
+                SceneErrorKind::Version,
+                format!(
+                    "scene format version {}, this megaray reads version {VERSION} (rebuild the scene)",
+                    header.version
+                ),
+            ));
+        }
+        let sum = xxhash_rust::xxh3::xxh3_64(&head[..248]);
+        if header.header_bytes != 256 || !sums_match(sum, header.header_checksum) {
+            return Err(SceneError::corrupt(path, "header checksum mismatch (the header is damaged)"));
+        }
+        if header.file_bytes != len {
+            return Err(SceneError::new(
+                path,
+                SceneErrorKind::Truncated,
+                format!("header says {} bytes but the file has {len} (truncated or appended to)", header.file_bytes),
+            ));
+        }
+        Ok(())
     }
 
     /// For an owned scene: no byte belongs to two tiles, or to a tile and a table (a page
@@ -465,6 +490,11 @@ impl Scene {
                 p.tile_bytes + attrs.iter().filter(|a| a.0 != 0).map(|a| a.1 * p.slot_count).sum::<u64>()
             })
             .sum()
+    }
+
+    /// A compact file's extents (`compact.rs`); empty for a file that is its own image.
+    pub fn extents(&self) -> &[Extent] {
+        self.backing.extents()
     }
 
     /// The file this scene was opened from.
@@ -724,6 +754,7 @@ impl Scene {
     pub fn load(&self, off: u64, len: u64) -> std::io::Result<()> {
         match &self.backing {
             Backing::Owned(r) => r.load(off, len),
+            Backing::Image(_) => Ok(()),
             Backing::Mapped(m) => {
                 let (off, len) = self.clamp_pages(off, len);
                 if len == 0 {
@@ -742,6 +773,7 @@ impl Scene {
     pub fn prefetch(&self, off: u64, len: u64) {
         match &self.backing {
             Backing::Owned(r) => r.prefetch(off, len),
+            Backing::Image(_) => {}
             Backing::Mapped(m) => {
                 let (off, len) = self.clamp_pages(off, len);
                 if len > 0 {
@@ -762,6 +794,8 @@ impl Scene {
                 r.release(off, len);
                 Ok(())
             }
+            // A decoded image is never dropped: nothing would read it back.
+            Backing::Image(_) => Ok(()),
             Backing::Mapped(m) => {
                 let (off, len) = self.clamp_pages(off, len);
                 if len == 0 {
@@ -934,7 +968,7 @@ mod tests {
                     blocks,
                     part: rand(5) as u32,
                     first_slot: rand(1 << 20) as u32,
-                    reserved: 0,
+                    stored_node_bytes: 0,
                     checksum: 0,
                 });
                 offset = (offset + bytes as u64).div_ceil(PAGE) * PAGE;

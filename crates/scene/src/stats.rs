@@ -4,7 +4,7 @@
 
 use megaray_base::Aabb;
 
-use crate::format::{Child, ChildRef};
+use crate::format::{Child, ChildRef, NODE_BYTES, PAGE};
 use crate::reader::Scene;
 
 /// Counts and SAH cost of the part trees (the top-level tree is not counted).
@@ -83,5 +83,71 @@ impl Scene {
             all.sah_leaves += w * s.sah_leaves;
         }
         all
+    }
+}
+
+/// Where a scene file's bytes go, as stored: a compact file's tiles as compacted, a plain
+/// file's as traced with their page padding (see `megaray info`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StoredBytes {
+    /// The full-detail parts' nodes.
+    pub nodes: u64,
+    /// The full-detail parts' triangles.
+    pub triangles: u64,
+    /// Zeros after tiles, up to their next page (a plain file's).
+    pub padding: u64,
+    /// The full-detail parts' attribute arrays.
+    pub attributes: u64,
+    /// The levels of detail: their tiles and attributes.
+    pub lod: u64,
+    /// Everything else: header, tables, the extent table.
+    pub tables: u64,
+}
+
+impl Scene {
+    /// The file's bytes by kind ([`StoredBytes`]).
+    pub fn stored_bytes(&self) -> StoredBytes {
+        let extents = self.extents();
+        let stored = |off: u64, len: u64| -> u64 {
+            if extents.is_empty() || len == 0 {
+                return len;
+            }
+            let i = extents.partition_point(|e| e.image_off < off);
+            extents.get(i).filter(|e| e.image_off == off).map_or(0, |e| e.stored_len)
+        };
+        let plain = extents.is_empty();
+        let full = self.full_part_count();
+        let mut s = StoredBytes::default();
+        for t in self.tiles() {
+            let total = stored(t.offset, t.bytes as u64);
+            let nodes = match plain {
+                true => t.node_count as u64 * NODE_BYTES as u64,
+                false => (t.stored_node_bytes as u64).min(total),
+            };
+            let pad = if plain { (t.bytes as u64).div_ceil(PAGE) * PAGE - t.bytes as u64 } else { 0 };
+            if t.part < full {
+                s.nodes += nodes;
+                s.triangles += total - nodes;
+                s.padding += pad;
+            } else {
+                s.lod += total + pad;
+            }
+        }
+        for (i, p) in self.parts().iter().enumerate() {
+            let n = p.slot_count;
+            for (off, size) in [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)] {
+                if off == 0 {
+                    continue;
+                }
+                let bytes = if plain { (n * size).div_ceil(PAGE) * PAGE } else { stored(off, n * size) };
+                match (i as u32) < full {
+                    true => s.attributes += bytes,
+                    false => s.lod += bytes,
+                }
+            }
+        }
+        let kinds = s.nodes + s.triangles + s.padding + s.attributes + s.lod;
+        s.tables = self.header().file_bytes.saturating_sub(kinds);
+        s
     }
 }

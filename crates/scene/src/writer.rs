@@ -142,6 +142,14 @@ pub struct SceneWriter {
     settings: String,
     /// Component names and triangle counts ([`SceneWriter::set_components`]).
     components: crate::Components,
+    /// Whether the file is written compact ([`SceneWriter::set_compact`]): then `cursor`
+    /// is where the next bytes lie in the image, `stored` where they go in the file.
+    compact: bool,
+    stored: u64,
+    /// The compact file's extents after its first (the bytes before `prefix_end`, which
+    /// lie in the file where they lie in the image).
+    extents: Vec<Extent>,
+    prefix_end: u64,
 }
 
 fn page_up(x: u64) -> u64 {
@@ -206,9 +214,44 @@ impl SceneWriter {
             instancing: None,
             settings: String::new(),
             components: crate::Components::default(),
+            compact: false,
+            stored: cursor,
+            extents: Vec::new(),
+            prefix_end: cursor,
         };
         w.write_at(bytemuck::cast_slice(&w.top_nodes.clone()), top_off)?;
         Ok(w)
+    }
+
+    /// Writes the file compact (`compact.rs`): tiles in the compact codec, everything after
+    /// the part directory packed, and an extent table mapping the image onto the file.
+    /// Call before appending parts.
+    pub fn set_compact(&mut self, on: bool) {
+        assert!(self.tiles.is_empty(), "set_compact after parts were appended");
+        self.compact = on;
+    }
+
+    /// Writes `bytes` at image offset `off`: there in a plain file; packed at the end of a
+    /// compact one, with an extent for them.
+    fn put(&mut self, bytes: &[u8], off: u64) -> Result<(), SceneError> {
+        if !self.compact {
+            return self.write_at(bytes, off);
+        }
+        self.put_stored(bytes, off, bytes.len() as u64, EXTENT_RAW)
+    }
+
+    /// Writes `bytes` (image bytes `off..off + image_len` as `kind`) at the end of a
+    /// compact file.
+    fn put_stored(&mut self, bytes: &[u8], off: u64, image_len: u64, kind: u32) -> Result<(), SceneError> {
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        let at = self.stored;
+        self.write_at(bytes, at)?;
+        let stored_len = bytes.len() as u64;
+        self.extents.push(Extent { image_off: off, image_len, stored_off: at, stored_len, kind, reserved: 0 });
+        self.stored = (at + stored_len).next_multiple_of(8);
+        Ok(())
     }
 
     fn write_at(&mut self, bytes: &[u8], off: u64) -> Result<(), SceneError> {
@@ -300,23 +343,37 @@ impl SceneWriter {
                 buf.extend_from_slice(bytemuck::bytes_of(&n));
             }
             buf.extend_from_slice(bytemuck::cast_slice(&tile.blocks));
-            let entry = TileEntry {
+            let mut entry = TileEntry {
                 offset: self.cursor,
                 bytes: buf.len() as u32,
                 node_count: tile.nodes.len() as u32,
                 blocks: tile.blocks.len() as u32,
                 part: index,
                 first_slot,
-                reserved: 0,
+                stored_node_bytes: 0,
                 checksum: xxhash_rust::xxh3::xxh3_64(&buf),
             };
             node_count += tile.nodes.len() as u64;
             first_slot += 4 * tile.blocks.len() as u32;
             let len = buf.len() as u64;
-            buf.resize(page_up(len) as usize, 0);
             let off = self.cursor;
-            self.write_at(&buf, off)?;
-            self.cursor += buf.len() as u64;
+            if self.compact {
+                let nodes = tile.nodes.len() as u32;
+                match crate::compact::encode(&buf, nodes, crate::compact::TilePlace::at(off, nodes)) {
+                    Some((stored, node_bytes)) => {
+                        self.put_stored(&stored, off, len, EXTENT_TILE)?;
+                        entry.stored_node_bytes = node_bytes;
+                    }
+                    None => {
+                        self.put(&buf, off)?;
+                        entry.stored_node_bytes = nodes * NODE_BYTES as u32;
+                    }
+                }
+            } else {
+                buf.resize(page_up(len) as usize, 0);
+                self.write_at(&buf, off)?;
+            }
+            self.cursor += page_up(len);
             self.tiles.push(entry);
         }
         let tile_bytes = self.cursor - start;
@@ -362,7 +419,7 @@ impl SceneWriter {
 
     fn append_attr(&mut self, bytes: &[u8]) -> Result<u64, SceneError> {
         let off = self.cursor;
-        self.write_at(bytes, off)?;
+        self.put(bytes, off)?;
         self.cursor = page_up(off + bytes.len() as u64);
         Ok(off)
     }
@@ -456,10 +513,10 @@ impl SceneWriter {
         self.write_at(bytemuck::cast_slice(&self.top_nodes.clone()), top_off)?;
         let tiles_off = self.cursor;
         let tiles = std::mem::take(&mut self.tiles);
-        self.write_at(bytemuck::cast_slice(&tiles), tiles_off)?;
+        self.put(bytemuck::cast_slice(&tiles), tiles_off)?;
         let materials_off = page_up(tiles_off + (tiles.len() * 40) as u64);
         let mat_bytes = encode_materials(materials);
-        self.write_at(&mat_bytes, materials_off)?;
+        self.put(&mat_bytes, materials_off)?;
         let mut end = materials_off + mat_bytes.len() as u64;
         let inst = self.instancing.take();
         let inst_bytes = inst.as_ref().map(|i| i.encode()).unwrap_or_default();
@@ -468,22 +525,44 @@ impl SceneWriter {
             let bad = |e: String| SceneError::new(&self.path, SceneErrorKind::Corrupt, format!("instances: {e}"));
             i.check(self.part_count, self.top_nodes.len() as u32, materials.len() as u32).map_err(bad)?;
             instances_off = page_up(end);
-            self.write_at(&inst_bytes, instances_off)?;
+            self.put(&inst_bytes, instances_off)?;
             end = instances_off + inst_bytes.len() as u64;
         }
         let settings = std::mem::take(&mut self.settings).into_bytes();
         let settings_off = if settings.is_empty() { 0 } else { end };
         if !settings.is_empty() {
-            self.write_at(&settings, settings_off)?;
+            self.put(&settings, settings_off)?;
             end += settings.len() as u64;
         }
         let comp_bytes = if comps.is_empty() { Vec::new() } else { comps.encode() };
         let components_off = if comp_bytes.is_empty() { 0 } else { end.next_multiple_of(8) };
         if !comp_bytes.is_empty() {
-            self.write_at(&comp_bytes, components_off)?;
+            self.put(&comp_bytes, components_off)?;
             end = components_off + comp_bytes.len() as u64;
         }
-        let file_bytes = page_up(end);
+        let mut file_bytes = page_up(end);
+        let (mut image_bytes, mut extents_off, mut extent_count, mut extents_checksum) = (0, 0, 0, 0);
+        if self.compact {
+            // The image is the plain file's bytes; the file, its first bytes and then
+            // what `put` packed, then the extent table.
+            image_bytes = file_bytes;
+            let first = Extent {
+                image_off: 0,
+                image_len: self.prefix_end,
+                stored_off: 0,
+                stored_len: self.prefix_end,
+                kind: EXTENT_RAW,
+                reserved: 0,
+            };
+            let mut extents = vec![first];
+            extents.append(&mut self.extents);
+            extents_off = self.stored;
+            let table: &[u8] = bytemuck::cast_slice(&extents);
+            self.write_at(table, extents_off)?;
+            extents_checksum = xxhash_rust::xxh3::xxh3_64(table);
+            extent_count = extents.len() as u64;
+            file_bytes = page_up(extents_off + table.len() as u64);
+        }
         let parts_off = self.parts_off;
         self.write_at(bytemuck::cast_slice(&parts), parts_off)?;
 
@@ -529,7 +608,10 @@ impl SceneWriter {
             components_bytes: comp_bytes.len() as u64,
             component_count: comps.names.len() as u32,
             component_run_count: comps.runs.len() as u32,
-            reserved: [0; 4],
+            image_bytes,
+            extents_off,
+            extent_count,
+            extents_checksum,
             header_checksum: 0,
         };
         h.header_checksum = xxhash_rust::xxh3::xxh3_64(&bytemuck::bytes_of(&h)[..248]);

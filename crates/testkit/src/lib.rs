@@ -206,3 +206,18 @@ pub fn brute_closest(scene: &megaray_scene::Scene, ray: &megaray_base::Ray) -> O
     }
     best
 }
+
+/// Where in `scene`'s file the byte at image offset `off` of a tile is stored, for tests that
+/// damage a tile: the same offset in a plain file; in a compact one, the byte of the tile's
+/// stored form as far into it (at most its last byte).
+pub fn stored_offset(scene: &megaray_scene::Scene, off: u64) -> u64 {
+    let ext = scene.extents();
+    let i = ext.partition_point(|e| e.image_off + e.image_len <= off);
+    match ext.get(i).filter(|e| e.image_off <= off) {
+        Some(e) if e.kind == megaray_scene::format::EXTENT_TILE => {
+            e.stored_off + (off - e.image_off).min(e.stored_len.saturating_sub(1))
+        }
+        Some(e) => e.stored_off + (off - e.image_off),
+        None => off,
+    }
+}

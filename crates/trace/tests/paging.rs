@@ -145,7 +145,7 @@ fn a_corrupt_tile_is_reported_by_file_and_tile() {
     let scene = scene(dir.path(), "plant:60k");
     let path = scene.path().to_path_buf();
     let t = scene.tiles().len() as u32 / 2;
-    let off = scene.tiles()[t as usize].offset + 200;
+    let off = megaray_testkit::stored_offset(&scene, scene.tiles()[t as usize].offset + 200);
     drop(scene);
     let mut bytes = std::fs::read(&path).unwrap();
     bytes[off as usize] ^= 0x40;

@@ -1,0 +1,71 @@
+//! Opening a compact file (`compact.rs`): its extent table, read and checked, and the
+//! memory its image needs when opened in core.
+
+use std::fs::File;
+use std::os::unix::fs::FileExt;
+use std::path::Path;
+
+use crate::error::SceneError;
+use crate::format::{Extent, Header, EXTENT_RAW, EXTENT_TILE, NODE_BYTES, PAGE};
+
+/// Reads and checks the extent table of the compact file `path` (`len` bytes): within the
+/// file, its checksum, extents in image order inside the image, none overlapping, each
+/// stored inside the file, the first one the header page stored where it lies.
+pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Result<Vec<Extent>, SceneError> {
+    let bad = |what: String| SceneError::corrupt(path, what);
+    let bytes = h
+        .extent_count
+        .checked_mul(std::mem::size_of::<Extent>() as u64)
+        .filter(|&b| h.extents_off.is_multiple_of(8) && h.extents_off.checked_add(b).is_some_and(|e| e <= len))
+        .ok_or_else(|| {
+            bad(format!("extent table ({} extents at byte {}) lies outside the file", h.extent_count, h.extents_off))
+        })?;
+    let mut raw = vec![0u8; bytes as usize];
+    file.read_exact_at(&mut raw, h.extents_off).map_err(|e| SceneError::io(path, "read", &e))?;
+    if !super::sums_match(xxhash_rust::xxh3::xxh3_64(&raw), h.extents_checksum) {
+        return Err(bad("extent table checksum mismatch (the table is damaged)".into()));
+    }
+    let extents: Vec<Extent> = raw.chunks_exact(40).map(bytemuck::pod_read_unaligned).collect();
+    if !h.image_bytes.is_multiple_of(PAGE) {
+        return Err(bad(format!("image of {} bytes is not whole pages", h.image_bytes)));
+    }
+    let mut end = 0;
+    for (i, e) in extents.iter().enumerate() {
+        let image_end = e.image_off.checked_add(e.image_len).filter(|&x| x <= h.image_bytes);
+        let stored_end = e.stored_off.checked_add(e.stored_len).filter(|&x| x <= len);
+        let kind_ok = match e.kind {
+            EXTENT_RAW => e.stored_len == e.image_len,
+            EXTENT_TILE => e.image_off.is_multiple_of(NODE_BYTES as u64) && e.image_len.is_multiple_of(16),
+            _ => false,
+        };
+        let first_ok = i > 0 || (e.image_off == 0 && e.stored_off == 0 && e.image_len >= 256 && e.kind == EXTENT_RAW);
+        if e.image_off < end || image_end.is_none() || stored_end.is_none() || !kind_ok || !first_ok {
+            return Err(bad(format!("extent {i} is out of order, out of bounds or of an unknown kind")));
+        }
+        end = e.image_off + e.image_len;
+    }
+    if extents.is_empty() {
+        return Err(bad("a compact file without extents".into()));
+    }
+    Ok(extents)
+}
+
+/// Refuses to decode a compact file whole (in core) when its image would not fit in
+/// memory: such a scene is for a pager (`--mem`).
+pub(super) fn check_fits(path: &Path, h: &Header) -> Result<(), SceneError> {
+    // SAFETY: sysconf only reads the system's configuration.
+    let (pages, size) = unsafe { (libc::sysconf(libc::_SC_PHYS_PAGES), libc::sysconf(libc::_SC_PAGESIZE)) };
+    let total = (pages.max(0) as u64).saturating_mul(size.max(0) as u64);
+    if total > 0 && h.image_bytes > total / 4 * 3 {
+        return Err(SceneError::new(
+            path,
+            crate::SceneErrorKind::TooLarge,
+            format!(
+                "the scene takes {:.1} GiB in memory, more than this machine holds ({:.1} GiB): page it with a budget (--mem SIZE)",
+                h.image_bytes as f64 / f64::from(1 << 30),
+                total as f64 / f64::from(1 << 30)
+            ),
+        ));
+    }
+    Ok(())
+}
