@@ -139,7 +139,7 @@ pub struct BuildSummary {
     pub objects: u32,
     pub instances: u64,
     pub instanced_triangles: u128,
-    /// Levels of detail made (parts of their own in the file), and their bytes.
+    /// Levels of detail made (parts of their own in the file), and their bytes as stored.
     pub lod_parts: u32,
     pub lod_bytes: u64,
     pub tiles: u32,
@@ -365,7 +365,6 @@ pub fn build_objects(
         writer.set_components(components.names.clone(), components.tri_counts.clone());
     }
     let lod_count = std::sync::atomic::AtomicU32::new(0);
-    let lod_bytes = std::sync::atomic::AtomicU64::new(0);
     let writer = Mutex::new(writer);
     progress.stage("build parts", triangles);
     let single = parts.len() == 1;
@@ -381,7 +380,6 @@ pub fn build_objects(
             for (k, (error, lod)) in lods.into_iter().enumerate() {
                 w.append_lod(i as u32, k as u32 + 1, error, &lod)?;
                 lod_count.fetch_add(1, Ordering::Relaxed);
-                lod_bytes.fetch_add(lod.tiles.iter().map(|t| t.bytes().div_ceil(4096) * 4096).sum(), Ordering::Relaxed);
                 recycle_part(lod);
             }
             drop(w);
@@ -398,6 +396,8 @@ pub fn build_objects(
     let writer = writer.into_inner().unwrap_or_else(|e| e.into_inner());
     let tiles = writer.tile_count();
     let file_bytes = writer.finish(bounds, dropped, &materials)?;
+    // The levels' bytes as stored (their tables only are read back).
+    let lod_bytes = megaray_scene::Scene::open_owned(out).map_or(0, |s| s.stored_bytes().lod);
     let parts_s = t2.elapsed().as_secs_f64();
     drop(tmp);
     Ok(BuildSummary {
@@ -409,7 +409,7 @@ pub fn build_objects(
         instances: instancing.as_ref().map_or(0, |i| i.instances.len() as u64),
         instanced_triangles: instancing.as_ref().map_or(triangles as u128, |i| i.instanced_triangles()),
         lod_parts: lod_count.load(Ordering::Relaxed),
-        lod_bytes: lod_bytes.load(Ordering::Relaxed),
+        lod_bytes,
         tiles,
         split_levels,
         split_passes: io.passes.load(Ordering::Relaxed),

@@ -6,8 +6,8 @@
 //! children, giving the parent's blocks back as it reads them on Linux (a hole punched,
 //! [`crate::stream::StreamReader::release`]), so that temporary files peak at one stream
 //! (plus [`SLACK`]); elsewhere, or on a file system that cannot punch holes, parent and
-//! children coexist: two streams. The scene file takes at least 46 bytes (measured on
-//! plant:100M with levels of detail, `docs/PERF.md`); it is written part by part, each
+//! children coexist: two streams. The scene file takes at least 20 bytes compact, 46 plain
+//! (measured on plant:100M with levels of detail, `docs/PERF.md`); it is written part by part, each
 //! part's stream removed once the part is in it, so that on one file system the two together
 //! peak at the larger of the temporary peak and the scene file (plus the parts in flight,
 //! within [`SLACK`]).
@@ -19,8 +19,10 @@ use crate::{BuildError, BuildOptions};
 /// Bytes per triangle of a positions stream (48 for the split streams of a model with
 /// attributes).
 pub const STREAM_BYTES_PER_TRI: u64 = 36;
-/// The fewest bytes per triangle a scene file has taken (levels of detail included).
+/// The fewest bytes per triangle a plain scene file has taken (levels of detail included).
 pub const SCENE_BYTES_PER_TRI: u64 = 46;
+/// The same for a compact one ([`BuildOptions::compact`]).
+pub const COMPACT_BYTES_PER_TRI: u64 = 20;
 /// Room for what a split pass holds beyond one stream (blocks read and not yet given back,
 /// the children's last blocks).
 pub const SLACK: u64 = 64 << 20;
@@ -35,7 +37,7 @@ pub fn space_needed(tris: u64, opts: &BuildOptions) -> (u64, u64, u64) {
         (true, true) => stream.saturating_add(SLACK),
         (true, false) => stream.saturating_mul(2),
     };
-    let scene = tris.saturating_mul(SCENE_BYTES_PER_TRI);
+    let scene = tris.saturating_mul(if opts.compact { COMPACT_BYTES_PER_TRI } else { SCENE_BYTES_PER_TRI });
     (temp, scene, temp.max(scene.saturating_add(SLACK)))
 }
 
@@ -92,10 +94,13 @@ mod tests {
 
     #[test]
     fn a_model_larger_than_a_part_needs_its_stream_and_slack() {
-        let opts = BuildOptions { max_part_tris: Some(1000), ..BuildOptions::default() };
+        let opts = BuildOptions { max_part_tris: Some(1000), compact: false, ..BuildOptions::default() };
         assert_eq!(space_needed(1000, &opts), (36_000, 46_000, 46_000 + SLACK));
         let split = if cfg!(target_os = "linux") { 36_036 + SLACK } else { 72_072 };
         assert_eq!(space_needed(1001, &opts), (split, 46_046, split.max(46_046 + SLACK)));
+        // A compact scene file: 20 bytes a triangle at least.
+        let opts = BuildOptions { compact: true, ..opts };
+        assert_eq!(space_needed(1001, &opts), (split, 20_020, split.max(20_020 + SLACK)));
     }
 
     #[test]

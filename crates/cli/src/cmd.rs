@@ -869,7 +869,7 @@ pub(crate) fn demo_scene(dir: &Path, tris: &str, build_mem: u64, bars: &dyn Prog
     let name = spec.name().replace(':', "-");
     let ply = dir.join(format!("{name}.ply"));
     let mray = dir.join(format!("{name}.mray"));
-    if Scene::open(&mray).is_ok() {
+    if Scene::open_owned(&mray).is_ok() {
         eprintln!("1/3 model, 2/3 scene: {} (cached)", mray.display());
         return Ok(mray);
     }
@@ -890,11 +890,11 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     let png = dir.join("demo.png");
     let mut paging = a.paging;
     if paging.mem.is_none() && !a.no_budget {
-        // A model larger than its budget: a third of the file, or what the pager needs at
-        // least (the tables and the pinned coarsest levels of detail, two tiles).
-        let file = std::fs::metadata(&mray).map(|m| m.len()).unwrap_or(0);
-        let need = megaray_page::Pager::min_budget(&Scene::open(&mray)?);
-        paging.mem = Some((file / 3).max(need + (4 << 20)));
+        // A model larger than its budget: a third of what it takes in memory, or what the
+        // pager needs at least (the tables and the pinned coarsest levels of detail, two tiles).
+        let probe = Scene::open_owned(&mray)?;
+        let need = megaray_page::Pager::min_budget(&probe);
+        paging.mem = Some((probe.bytes().len() as u64 / 3).max(need + (4 << 20)));
     }
     eprintln!(
         "3/3 image: {}x{} under the procedural sky ({}), env shader, {} frames of 1 primary + {} light samples per pixel{}, denoised unless --no-denoise",
@@ -907,8 +907,9 @@ pub fn demo(a: DemoArgs, bars: &Bars) -> Result<()> {
     );
     if let Some(mem) = paging.mem {
         eprintln!(
-            "    the scene paged within {} (its file is {}); levels of detail within {} pixel{}",
+            "    the scene paged within {} (it takes {} in memory, its file {}); levels of detail within {} pixel{}",
             format_size(mem),
+            format_size(Scene::open_owned(&mray).map_or(0, |s| s.bytes().len() as u64)),
             format_size(std::fs::metadata(&mray).map(|m| m.len()).unwrap_or(0)),
             a.lod_error,
             if a.lod_error == 1.0 { "" } else { "s" }

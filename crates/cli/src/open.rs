@@ -36,7 +36,8 @@ pub fn scene_for(path: Option<&Path>, o: &OpenArgs, bars: &dyn Progress) -> Resu
         let dir = crate::cmd::cache_dir(None);
         return Ok(Opened { path: crate::cmd::demo_scene(&dir, "3M", 192 << 20, bars)?, _tmp: None });
     };
-    match Scene::open(path) {
+    // The tables only: a compact file is not decoded here.
+    match Scene::open_owned(path) {
         Ok(_) => return Ok(Opened { path: path.to_path_buf(), _tmp: None }),
         Err(e)
             if e.kind != SceneErrorKind::NotAScene
@@ -57,7 +58,7 @@ pub fn scene_for(path: Option<&Path>, o: &OpenArgs, bars: &dyn Progress) -> Resu
     std::fs::create_dir_all(&dir).with_context(|| format!("{}: cannot create the folder", dir.display()))?;
     let key = content_key(path)?;
     let out = dir.join(format!("{}-{key:016x}.mray", sanitize(&stem)));
-    if Scene::open(&out).is_ok() {
+    if Scene::open_owned(&out).is_ok() {
         eprintln!("{}: the scene built from it before: {}", path.display(), out.display());
     } else {
         eprintln!("{}: building it into {}", path.display(), out.display());

@@ -19,9 +19,10 @@ use serde_json::json;
 pub struct PagingArgs {
     /// Memory budget for resident scene data (e.g. 2G): tiles are loaded by fetcher threads
     /// and evicted (second chance) to stay within it, and rays that need a missing tile wait
-    /// parked while threads trace others. Without it the whole file is mapped and the
-    /// operating system pages it. Process memory is this plus a fixed overhead (see
-    /// docs/ARCHITECTURE.md).
+    /// parked while threads trace others. Without it the whole scene is read into memory (a
+    /// plain file is mapped and the operating system pages it); a compact scene larger than
+    /// three quarters of this machine's memory is then paged within half of it. Process
+    /// memory is this plus a fixed overhead (see docs/ARCHITECTURE.md).
     #[arg(long, value_name = "SIZE", value_parser = parse_mem)]
     pub mem: Option<u64>,
     /// Fetcher threads loading tiles (with --mem). Each waits on one tile read at a time;
@@ -44,13 +45,32 @@ impl PagingArgs {
     /// tile by a pager ([`Scene::open_owned`]).
     pub fn open(&self, path: &Path) -> Result<(Arc<Scene>, Option<Pager>)> {
         crate::fault::watch(path);
-        let Some(budget) = self.mem else { return Ok((Arc::new(Scene::open(path)?), None)) };
+        let Some(budget) = self.mem.or_else(|| default_budget(path)) else {
+            return Ok((Arc::new(Scene::open(path)?), None));
+        };
         if !(1..=64).contains(&self.fetchers) {
             bail!("--fetchers must be 1..=64");
         }
         let pager = Pager::open(path, PagerOptions { budget, fetchers: self.fetchers })?;
         Ok((pager.scene().clone(), Some(pager)))
     }
+}
+
+/// A budget for a compact scene given none whose image would not fit in memory: half of
+/// the machine's memory (said on stderr). `None` for any other scene.
+fn default_budget(path: &Path) -> Option<u64> {
+    let h = *Scene::open_owned(path).ok()?.header();
+    if !h.is_compact() || megaray_scene::fits_in_memory(h.image_len()) {
+        return None;
+    }
+    let budget = megaray_scene::physical_memory() / 2;
+    eprintln!(
+        "{}: the scene takes {} in memory, more than this machine holds: paged within {} (--mem sets the budget)",
+        path.display(),
+        format_size(h.image_len()),
+        format_size(budget)
+    );
+    Some(budget)
 }
 
 /// The first fault found in the scene's tiles (damaged, or unreadable because the file was

@@ -120,3 +120,31 @@ fn attributes_page_with_their_tiles() {
     assert_eq!(code, 0, "{err}");
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap(), "the budgeted render differs");
 }
+
+/// A compact scene that does not fit in memory, rendered without `--mem`: paged within half
+/// of the machine's memory, said in one line, the same picture. (The scene's header is made
+/// to claim an image of 16 TiB, all but its first pages zeros no table points into.)
+#[test]
+fn a_compact_scene_larger_than_memory_is_paged_without_asking() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = scene(dir.path(), "plant:60k");
+    assert!(scene.header().is_compact());
+    let path = scene.path().to_path_buf();
+    drop(scene);
+    let (a, b) = (dir.path().join("a.png"), dir.path().join("b.png"));
+    let common = ["--res", "64x48", "--cam-offset", "0,0.3,0.6"];
+    let (code, _, err) = run(&[&["render", path.to_str().unwrap(), "-o", a.to_str().unwrap()], &common[..]].concat());
+    assert_eq!(code, 0, "{err}");
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[216..224].copy_from_slice(&(1u64 << 44).to_le_bytes());
+    let sum = xxhash_rust::xxh3::xxh3_64(&bytes[..248]);
+    bytes[248..256].copy_from_slice(&sum.to_le_bytes());
+    let huge = dir.path().join("huge.mray");
+    std::fs::write(&huge, &bytes).unwrap();
+    let e = Scene::open(&huge).err().expect("too large to open in core").to_string();
+    assert!(e.contains("huge.mray") && e.contains("--mem"), "{e}");
+    let (code, _, err) = run(&[&["render", huge.to_str().unwrap(), "-o", b.to_str().unwrap()], &common[..]].concat());
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("huge.mray") && err.contains("paged within"), "{err}");
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}

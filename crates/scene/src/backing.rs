@@ -76,6 +76,8 @@ type Decoded = std::cell::RefCell<(u64, usize, Vec<u8>)>;
 
 thread_local! {
     static DECODED: Decoded = const { std::cell::RefCell::new((0, 0, Vec::new())) };
+    /// A stored tile's bytes, read into a buffer each thread keeps.
+    static STORED: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 static REGIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
@@ -141,6 +143,9 @@ impl Region {
     /// Reads the file's bytes `off..off + len`, widened to whole pages, into the region.
     /// On error nothing stays counted as loaded.
     pub(crate) fn load(&self, off: u64, len: u64) -> io::Result<()> {
+        if let Some(e) = self.whole_tile(off, len) {
+            return self.load_tile(e);
+        }
         let Some(span) = self.span(off, len) else { return Ok(()) };
         let mut held = Vec::with_capacity(2);
         let result = (|| {
@@ -155,6 +160,36 @@ impl Region {
         })();
         if result.is_err() {
             for p in held {
+                self.unhold(p);
+            }
+            self.discard(span.whole.0, span.whole.1);
+        }
+        result
+    }
+
+    /// The tile extent that is exactly `off..off + len`, if any (what a pager loads).
+    fn whole_tile(&self, off: u64, len: u64) -> Option<&Extent> {
+        let e = self.extents_in(off, off.saturating_add(len)).first()?;
+        (e.kind == EXTENT_TILE && e.image_off == off && e.image_len == len).then_some(e)
+    }
+
+    /// Loads tile extent `e`, decoded straight into place. A tile starts on a page and the
+    /// rest of its last page holds nothing else (tiles and attribute arrays start on pages),
+    /// so that page is counted as held, as [`Region::release`] expects, but not read apart.
+    fn load_tile(&self, e: &Extent) -> io::Result<()> {
+        let Some(span) = self.span(e.image_off, e.image_len) else { return Ok(()) };
+        if let Some(p) = span.tail {
+            *self.shared.lock().unwrap_or_else(|x| x.into_inner()).entry(p).or_insert(0) += 1;
+        }
+        let (at, n) = (e.image_off as usize, e.image_len as usize);
+        self.populate(at, n);
+        // SAFETY: the destination lies inside the mapping, and no reader reads it until the
+        // load is published (see the `Sync` note). Another holder of the last page (there is
+        // none in files megaray writes) would see the same bytes written again.
+        let out = unsafe { std::slice::from_raw_parts_mut(self.ptr.add(at), n) };
+        let result = self.decode_tile(e, out);
+        if result.is_err() {
+            if let Some(p) = span.tail {
                 self.unhold(p);
             }
             self.discard(span.whole.0, span.whole.1);
@@ -312,14 +347,10 @@ impl Region {
             }
             let k = k + self.extents.partition_point(|x| x.image_off + x.image_len <= from);
             if lo == e.image_off && hi == e.image_off + e.image_len {
-                let stored = self.stored(e)?;
                 // SAFETY: the destination lies inside the mapping, and no reader reads it
                 // until the load is published (see the `Sync` note).
                 let out = unsafe { std::slice::from_raw_parts_mut(self.ptr.add(lo as usize), (hi - lo) as usize) };
-                let place = TilePlace::at(e.image_off, compact::stored_counts(&stored).map_or(0, |c| c.0));
-                if compact::decode(&stored, out, place).is_err() {
-                    out.fill(0);
-                }
+                self.decode_tile(e, out)?;
                 continue;
             }
             self.decoded(k, e, |tile| {
@@ -336,14 +367,9 @@ impl Region {
         DECODED.with(|d| {
             let mut d = d.borrow_mut();
             if d.0 != self.id || d.1 != k || d.2.len() != e.image_len as usize {
-                let stored = self.stored(e)?;
                 let mut tile = std::mem::take(&mut d.2);
-                tile.clear();
                 tile.resize(e.image_len as usize, 0);
-                let place = TilePlace::at(e.image_off, compact::stored_counts(&stored).map_or(0, |c| c.0));
-                if compact::decode(&stored, &mut tile, place).is_err() {
-                    tile.fill(0);
-                }
+                self.decode_tile(e, &mut tile)?;
                 *d = (self.id, k, tile);
             }
             f(&d.2);
@@ -351,19 +377,27 @@ impl Region {
         })
     }
 
-    /// The stored bytes of extent `e`.
-    fn stored(&self, e: &Extent) -> io::Result<Vec<u8>> {
-        let mut buf = vec![0u8; e.stored_len as usize];
-        let mut done = 0;
-        while done < buf.len() {
-            match std::os::unix::fs::FileExt::read_at(&self.file, &mut buf[done..], e.stored_off + done as u64) {
-                Ok(0) => return Err(truncated(e.stored_off + e.stored_len)),
-                Ok(got) => done += got,
-                Err(x) if x.kind() == io::ErrorKind::Interrupted => {}
-                Err(x) => return Err(x),
+    /// Decodes tile extent `e` into `out` (its image length): zeros where the stored tile
+    /// does not decode (its checksum then fails when checked). Only reading can fail.
+    fn decode_tile(&self, e: &Extent, out: &mut [u8]) -> io::Result<()> {
+        STORED.with(|b| {
+            let mut buf = b.borrow_mut();
+            buf.resize(e.stored_len as usize, 0);
+            let mut done = 0;
+            while done < buf.len() {
+                match std::os::unix::fs::FileExt::read_at(&self.file, &mut buf[done..], e.stored_off + done as u64) {
+                    Ok(0) => return Err(truncated(e.stored_off + e.stored_len)),
+                    Ok(got) => done += got,
+                    Err(x) if x.kind() == io::ErrorKind::Interrupted => {}
+                    Err(x) => return Err(x),
+                }
             }
-        }
-        Ok(buf)
+            let place = TilePlace::at(e.image_off, compact::stored_counts(&buf).map_or(0, |c| c.0));
+            if compact::decode(&buf, out, place).is_err() {
+                out.fill(0);
+            }
+            Ok(())
+        })
     }
 
     /// Faults the region's pages `at..at + n` in with one call rather than one trap per

@@ -265,22 +265,27 @@ pub fn decode(stored: &[u8], out: &mut [u8], place: TilePlace) -> Result<(), Str
             _ => u16::from_le_bytes(idx[2 * i..2 * i + 2].try_into().expect("2 bytes")) as usize,
         }
     };
+    let pos: Vec<[u32; 3]> = pos
+        .chunks_exact(12)
+        .map(|c| std::array::from_fn(|a| u32::from_le_bytes(c[4 * a..4 * a + 4].try_into().expect("4 bytes"))))
+        .collect();
     let tris = &mut out[node_count * NODE_BYTES..];
-    tris.fill(0);
     let mut t = 0;
     for (b, &n) in used.iter().enumerate() {
-        let blk = &mut tris[b * TRI4_BYTES..(b + 1) * TRI4_BYTES];
+        // The block's 36 floats (corner c, axis a, lane l at 12 c + 4 a + l), then its bytes
+        // (the format is little-endian, as is every machine megaray runs on).
+        let mut blk = [0u32; 36];
         for l in 0..n as usize {
             for c in 0..3 {
                 let v = index(3 * t + c);
-                let p = pos.get(12 * v..12 * v + 12).ok_or_else(|| format!("block {b}: corner {v} of {corners}"))?;
-                for a in 0..3 {
-                    let at = 4 * (12 * c + 4 * a + l);
-                    blk[at..at + 4].copy_from_slice(&p[4 * a..4 * a + 4]);
-                }
+                let p = pos.get(v).ok_or_else(|| format!("block {b}: corner {v} of {corners}"))?;
+                blk[12 * c + l] = p[0];
+                blk[12 * c + 4 + l] = p[1];
+                blk[12 * c + 8 + l] = p[2];
             }
             t += 1;
         }
+        tris[b * TRI4_BYTES..(b + 1) * TRI4_BYTES].copy_from_slice(bytemuck::cast_slice(&blk[..]));
     }
     Ok(())
 }

@@ -45,6 +45,6 @@ pub use components::Components;
 pub use error::{SceneError, SceneErrorKind};
 pub use format::{Child, ChildRef, Header, Node8, PartEntry, TileEntry, Tri4};
 pub use instances::{Group, Instance, Instancing, Object, Target};
-pub use reader::{drop_page_cache, CheckedTiles, Scene, Tile};
+pub use reader::{drop_page_cache, fits_in_memory, physical_memory, CheckedTiles, Scene, Tile};
 pub use stats::{StoredBytes, TreeStats};
 pub use writer::{BlobChild, BlobRef, MaterialDesc, PartBlob, SceneWriter, TileBlob};

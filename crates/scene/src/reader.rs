@@ -33,6 +33,7 @@ const TILE_OK: u8 = 1;
 mod checked;
 mod image;
 pub use checked::CheckedTiles;
+pub use image::{fits_in_memory, physical_memory};
 
 const TILE_CORRUPT: u8 = 2;
 

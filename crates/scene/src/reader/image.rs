@@ -50,13 +50,25 @@ pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Re
     Ok(extents)
 }
 
-/// Refuses to decode a compact file whole (in core) when its image would not fit in
-/// memory: such a scene is for a pager (`--mem`).
-pub(super) fn check_fits(path: &Path, h: &Header) -> Result<(), SceneError> {
+/// This machine's memory, in bytes (0 where unknown).
+pub fn physical_memory() -> u64 {
     // SAFETY: sysconf only reads the system's configuration.
     let (pages, size) = unsafe { (libc::sysconf(libc::_SC_PHYS_PAGES), libc::sysconf(libc::_SC_PAGESIZE)) };
-    let total = (pages.max(0) as u64).saturating_mul(size.max(0) as u64);
-    if total > 0 && h.image_bytes > total / 4 * 3 {
+    (pages.max(0) as u64).saturating_mul(size.max(0) as u64)
+}
+
+/// Whether a scene whose image is `image_bytes` long may be opened in core: it takes at
+/// most three quarters of this machine's memory.
+pub fn fits_in_memory(image_bytes: u64) -> bool {
+    let total = physical_memory();
+    total == 0 || image_bytes <= total / 4 * 3
+}
+
+/// Refuses to decode a compact file whole (in core) when its image would not fit in
+/// memory ([`fits_in_memory`]): such a scene is for a pager (`--mem`).
+pub(super) fn check_fits(path: &Path, h: &Header) -> Result<(), SceneError> {
+    let total = physical_memory();
+    if !fits_in_memory(h.image_bytes) {
         return Err(SceneError::new(
             path,
             crate::SceneErrorKind::TooLarge,
