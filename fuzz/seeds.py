@@ -125,6 +125,8 @@ with tempfile.TemporaryDirectory() as t:
     put("scene", "tiny.mray", open(scene, "rb").read())
     subprocess.run([megaray, "build", o, "-o", scene, "-q", "--no-lod"], check=True)
     put("scene", "tiny-nolod.mray", open(scene, "rb").read())
+    subprocess.run([megaray, "build", o, "-o", scene, "-q", "--plain"], check=True)
+    put("scene", "tiny-plain.mray", open(scene, "rb").read())
     exr = os.path.join(t, "e.exr")
     subprocess.run([megaray, "render", scene, "-o", exr, "--res", "4x2", "-q"], check=True)
     put("env", "tiny.exr", open(exr, "rb").read())

@@ -1,5 +1,5 @@
-//! A scene file: opened (header and tables checked), every tile checked, and, when all pass,
-//! rays traced through it (the traversal must stay inside what the checks allowed).
+//! A scene file: opened for a pager (every tile loaded, checked, released), opened in core
+//! (header and tables checked), every tile checked, and, when all pass, rays traced through it (the traversal must stay inside what the checks allowed).
 //! Checksums are off in fuzzing builds (`cfg(fuzzing)`), so mutations reach the checks.
 use megaray_base::{Ray, Vec3};
 use megaray_scene::Scene;
@@ -8,6 +8,19 @@ use megaray_trace::Tracer;
 fn main() {
     afl::fuzz!(|data: &[u8]| {
         let path = megaray_fuzz::file("input.mray", data);
+        // Opened for a pager (tables only), then every tile loaded, checked and released;
+        // then opened in core.
+        if let Ok(owned) = Scene::open_owned(&path) {
+            for t in 0..owned.tiles().len() as u32 {
+                let ranges = owned.tile_ranges(t).unwrap_or_default();
+                if ranges.iter().all(|&(o, l)| owned.load(o, l).is_ok()) {
+                    let _ = owned.check_tile(t);
+                }
+                for &(o, l) in &ranges {
+                    let _ = owned.release(o, l);
+                }
+            }
+        }
         let Ok(scene) = Scene::open(&path) else { return };
         if !scene.check_all_tiles() {
             return;

@@ -3,7 +3,7 @@
 //! tile found corrupt when used (a stored tile), never a panic.
 
 use megaray_base::Aabb;
-use megaray_scene::format::{Header, Node8, PackedNormals, Tri4};
+use megaray_scene::format::{self, Extent, Header, Node8, PackedNormals, Tri4};
 use megaray_scene::{BlobRef, PartBlob, Scene, SceneWriter, TileBlob};
 use std::path::{Path, PathBuf};
 
@@ -202,4 +202,58 @@ fn damage_is_an_error_or_a_corrupt_tile() {
         }
         assert!(s.check_tile(t).is_err());
     }
+}
+
+/// Extent tables a writer never makes, each made consistent again (checksums), refused at
+/// open: two tiles stored in the same bytes, a tile stored no smaller than itself, a tile
+/// sharing its last page, an image past 2^44 bytes.
+#[test]
+fn crafted_extent_tables_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, compact) = both(dir.path());
+    let good = std::fs::read(&compact).unwrap();
+    let h: Header = bytemuck::pod_read_unaligned(&good[..256]);
+    let at = |i: usize| h.extents_off as usize + 40 * i;
+    let extent = |b: &[u8], i: usize| -> Extent { bytemuck::pod_read_unaligned(&b[at(i)..at(i) + 40]) };
+    let tiles: Vec<usize> =
+        (0..h.extent_count as usize).filter(|&i| extent(&good, i).kind == format::EXTENT_TILE).collect();
+    assert!(tiles.len() >= 2);
+    let seal = |b: &mut Vec<u8>| {
+        let table = h.extents_off as usize..at(h.extent_count as usize);
+        let sum = xxhash_rust::xxh3::xxh3_64(&b[table]);
+        b[240..248].copy_from_slice(&sum.to_le_bytes());
+        reseal(b);
+    };
+    let refused = |b: &[u8], why: &str| {
+        let bad = dir.path().join("crafted.mray");
+        std::fs::write(&bad, b).unwrap();
+        let e = Scene::open_owned(&bad).err().unwrap_or_else(|| panic!("{why}: opened")).to_string();
+        assert!(e.contains("extent") || e.contains("image"), "{why}: {e}");
+    };
+    let (t0, t1) = (tiles[0], tiles[1]);
+    let mut b = good.clone();
+    let mut e = extent(&b, t1);
+    e.stored_off = extent(&b, t0).stored_off;
+    b[at(t1)..at(t1) + 40].copy_from_slice(bytemuck::bytes_of(&e));
+    seal(&mut b);
+    refused(&b, "two tiles in the same stored bytes");
+    let mut b = good.clone();
+    let mut e = extent(&b, t0);
+    e.image_len = e.stored_len / 16 * 16;
+    b[at(t0)..at(t0) + 40].copy_from_slice(bytemuck::bytes_of(&e));
+    seal(&mut b);
+    refused(&b, "a tile stored no smaller");
+    let mut b = good.clone();
+    let mut e = extent(&b, t1);
+    e.image_off = extent(&b, t0).image_off + extent(&b, t0).image_len.next_multiple_of(256);
+    if e.image_off % 4096 == 0 {
+        e.image_off += 256;
+    }
+    b[at(t1)..at(t1) + 40].copy_from_slice(bytemuck::bytes_of(&e));
+    seal(&mut b);
+    refused(&b, "a tile off a page, in another's last page");
+    let mut b = good.clone();
+    b[216..224].copy_from_slice(&((1u64 << 44) + 4096).to_le_bytes());
+    seal(&mut b);
+    refused(&b, "an image past 2^44 bytes");
 }

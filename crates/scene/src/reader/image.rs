@@ -6,11 +6,20 @@ use std::os::unix::fs::FileExt;
 use std::path::Path;
 
 use crate::error::SceneError;
-use crate::format::{Extent, Header, EXTENT_RAW, EXTENT_TILE, NODE_BYTES, PAGE};
+use crate::format::{Extent, Header, EXTENT_RAW, EXTENT_TILE, PAGE};
+
+/// The longest image a reader takes: the format addresses 2^44 bytes (`ChildRef`).
+const MAX_IMAGE: u64 = 1 << 44;
+/// The longest tile a reader decodes (`megaray build --tile-size` is at most 64 MiB).
+const MAX_TILE: u64 = 1 << 30;
 
 /// Reads and checks the extent table of the compact file `path` (`len` bytes): within the
-/// file, its checksum, extents in image order inside the image, none overlapping, each
-/// stored inside the file, the first one the header page stored where it lies.
+/// file, its checksum, an image of whole pages within what the format addresses; extents in
+/// image order inside the image, none overlapping, their stored forms in file order inside
+/// the file, none overlapping; tiles starting on a page, alone in their last page, at most
+/// [`MAX_TILE`] long and stored smaller; the first extent the header, stored where it lies.
+/// A file that passes makes every load read each stored byte at most once per tile and
+/// allocate at most a tile's bytes.
 pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Result<Vec<Extent>, SceneError> {
     let bad = |what: String| SceneError::corrupt(path, what);
     let bytes = h
@@ -26,23 +35,41 @@ pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Re
         return Err(bad("extent table checksum mismatch (the table is damaged)".into()));
     }
     let extents: Vec<Extent> = raw.chunks_exact(40).map(bytemuck::pod_read_unaligned).collect();
-    if !h.image_bytes.is_multiple_of(PAGE) {
-        return Err(bad(format!("image of {} bytes is not whole pages", h.image_bytes)));
+    if !h.image_bytes.is_multiple_of(PAGE) || h.image_bytes > MAX_IMAGE {
+        return Err(bad(format!("image of {} bytes is not whole pages within 16 TiB", h.image_bytes)));
     }
-    let mut end = 0;
+    // Where the last extent's image and stored bytes end (a tile's image: its last page).
+    let (mut end, mut stored) = (0, 0);
     for (i, e) in extents.iter().enumerate() {
         let image_end = e.image_off.checked_add(e.image_len).filter(|&x| x <= h.image_bytes);
         let stored_end = e.stored_off.checked_add(e.stored_len).filter(|&x| x <= len);
-        let kind_ok = match e.kind {
-            EXTENT_RAW => e.stored_len == e.image_len,
-            EXTENT_TILE => e.image_off.is_multiple_of(NODE_BYTES as u64) && e.image_len.is_multiple_of(16),
-            _ => false,
-        };
+        let kind_ok = e.reserved == 0
+            && e.image_len > 0
+            && match e.kind {
+                EXTENT_RAW => e.stored_len == e.image_len,
+                EXTENT_TILE => {
+                    e.image_off.is_multiple_of(PAGE)
+                        && e.image_len.is_multiple_of(16)
+                        && e.image_len <= MAX_TILE
+                        && e.stored_len < e.image_len
+                }
+                _ => false,
+            };
         let first_ok = i > 0 || (e.image_off == 0 && e.stored_off == 0 && e.image_len >= 256 && e.kind == EXTENT_RAW);
-        if e.image_off < end || image_end.is_none() || stored_end.is_none() || !kind_ok || !first_ok {
+        if e.image_off < end
+            || e.stored_off < stored
+            || image_end.is_none()
+            || stored_end.is_none()
+            || !kind_ok
+            || !first_ok
+        {
             return Err(bad(format!("extent {i} is out of order, out of bounds or of an unknown kind")));
         }
         end = e.image_off + e.image_len;
+        if e.kind == EXTENT_TILE {
+            end = end.next_multiple_of(PAGE);
+        }
+        stored = e.stored_off + e.stored_len;
     }
     if extents.is_empty() {
         return Err(bad("a compact file without extents".into()));
