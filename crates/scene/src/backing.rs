@@ -174,8 +174,9 @@ impl Region {
     }
 
     /// Loads tile extent `e`, decoded straight into place. A tile starts on a page and the
-    /// rest of its last page holds nothing else (tiles and attribute arrays start on pages),
-    /// so that page is counted as held, as [`Region::release`] expects, but not read apart.
+    /// rest of its last page holds nothing else (the reader checks both when it opens the
+    /// file, `reader/image.rs`), so that page is counted as held, as [`Region::release`]
+    /// expects, but not read apart.
     fn load_tile(&self, e: &Extent) -> io::Result<()> {
         let Some(span) = self.span(e.image_off, e.image_len) else { return Ok(()) };
         if let Some(p) = span.tail {
@@ -184,8 +185,7 @@ impl Region {
         let (at, n) = (e.image_off as usize, e.image_len as usize);
         self.populate(at, n);
         // SAFETY: the destination lies inside the mapping, and no reader reads it until the
-        // load is published (see the `Sync` note). Another holder of the last page (there is
-        // none in files megaray writes) would see the same bytes written again.
+        // load is published (see the `Sync` note); the tile's pages are its own.
         let out = unsafe { std::slice::from_raw_parts_mut(self.ptr.add(at), n) };
         let result = self.decode_tile(e, out);
         if result.is_err() {
