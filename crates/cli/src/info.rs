@@ -29,11 +29,16 @@ pub struct InfoArgs {
 }
 
 pub fn info(a: InfoArgs) -> Result<()> {
-    // Walking trees and checking tiles read them: in core. Otherwise the tables suffice
-    // (a compact file is then not decoded).
-    let scene = if a.verify || a.tree { Scene::open(&a.scene)? } else { Scene::open_owned(&a.scene)? };
+    // The tables suffice (a compact file is then not decoded); walking trees reads them in
+    // core, and so does checking tiles when the scene fits in memory (else tile by tile).
+    let probe = Scene::open_owned(&a.scene)?;
+    let in_core = a.tree || (a.verify && megaray_scene::fits_in_memory(probe.bytes().len() as u64));
+    let scene = if in_core { Scene::open(&a.scene)? } else { probe };
     if a.verify {
-        scene.verify_all()?;
+        match scene.is_owned() {
+            true => scene.verify_tile_by_tile()?,
+            false => scene.verify_all()?,
+        }
     }
     let h = *scene.header();
     // The full-detail parts (the levels of detail after them are reported on their own).

@@ -147,4 +147,16 @@ fn a_compact_scene_larger_than_memory_is_paged_without_asking() {
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("huge.mray") && err.contains("paged within"), "{err}");
     assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    // `info --verify` checks it tile by tile; a damaged tile is then one error line.
+    let (code, out, err) = run(&["info", huge.to_str().unwrap(), "--verify"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("verified") && out.contains("compact"), "{out}");
+    let probe = Scene::open_owned(&huge).unwrap();
+    let at = megaray_testkit::stored_offset(&probe, probe.tiles()[1].offset + 100) as usize;
+    drop(probe);
+    bytes[at] ^= 0x10;
+    std::fs::write(&huge, &bytes).unwrap();
+    let (code, _, err) = run(&["info", huge.to_str().unwrap(), "--verify"]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("huge.mray") && err.contains("tile 1") && err.trim().lines().count() == 1, "{err}");
 }
