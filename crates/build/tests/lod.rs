@@ -67,7 +67,7 @@ fn stand_ins_lie_within_their_error_of_real_models() {
         assert!(scene.verify_all().is_ok());
         assert_eq!(s.lod_parts, scene.header().lod_part_count);
         check(&scene, name);
-        let share = scene.lod_bytes() as f64 / scene.header().file_bytes as f64;
+        let share = scene.stored_bytes().lod as f64 / scene.header().file_bytes as f64;
         assert!(share <= 0.15, "{name}: levels of detail are {:.1}% of the file", 100.0 * share);
     }
 }
@@ -88,7 +88,7 @@ fn a_build_without_levels_of_detail_has_none() {
     let opts = megaray_build::BuildOptions { lod: None, tile_target: 64 << 10, ..Default::default() };
     let s = megaray_build::build_scene(&[model("stanford-bunny.obj")], &out, &opts, &megaray_base::NoProgress).unwrap();
     let scene = Scene::open(&out).unwrap();
-    assert_eq!((s.lod_parts, scene.header().lod_part_count, scene.lod_bytes()), (0, 0, 0));
+    assert_eq!((s.lod_parts, scene.header().lod_part_count, scene.stored_bytes().lod), (0, 0, 0));
     assert_eq!(scene.full_part_count(), scene.header().part_count);
     assert_eq!(scene.lod_chain(0).count(), 1);
 }

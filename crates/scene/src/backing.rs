@@ -66,21 +66,12 @@ pub(crate) struct Region {
     /// A compact file's extents, in image order (checked by the reader); empty when the
     /// file is its own image.
     extents: Vec<Extent>,
-    /// This region's number, for the decoded-tile cache ([`Region::decoded`]).
-    id: u64,
 }
 
-/// The tile a thread decoded last, `(region id, extent index, bytes)`: a tile load reads its
-/// last, partly covered page apart from its whole pages, and decodes the tile once for both.
-type Decoded = std::cell::RefCell<(u64, usize, Vec<u8>)>;
-
 thread_local! {
-    static DECODED: Decoded = const { std::cell::RefCell::new((0, 0, Vec::new())) };
     /// A stored tile's bytes, read into a buffer each thread keeps.
     static STORED: std::cell::RefCell<Vec<u8>> = const { std::cell::RefCell::new(Vec::new()) };
 }
-
-static REGIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 // SAFETY: the region is plain memory owned by this struct. Bytes are written only by
 // `load` (through the kernel, `pread`) into pages no reader may be reading: pages counted in
@@ -129,8 +120,7 @@ impl Region {
         unsafe {
             libc::posix_fadvise(file.as_raw_fd(), 0, 0, libc::POSIX_FADV_NORMAL);
         }
-        let id = REGIONS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        Ok(Region { ptr: ptr.cast(), len, mapped, file, shared: Mutex::new(HashMap::new()), extents, id })
+        Ok(Region { ptr: ptr.cast(), len, mapped, file, shared: Mutex::new(HashMap::new()), extents })
     }
 
     #[inline(always)]
@@ -336,16 +326,17 @@ impl Region {
     /// [`Region::read`] through the extents (image bytes no extent covers stay as they are:
     /// zero, as the pages being read are not loaded). A stored tile that does not decode
     /// reads as zeros: its checksum then fails when it is checked, as a damaged plain
-    /// tile's does. Only reading the file can fail.
+    /// tile's does. Only reading the file can fail. A tile covered in part (no load of
+    /// megaray's own does so: a pager loads whole tiles, [`Region::load_tile`]) is decoded
+    /// aside and its part copied.
     fn read_image(&self, at: usize, n: usize) -> io::Result<()> {
         let (from, to) = (at as u64, (at + n) as u64);
-        for (k, e) in self.extents_in(from, to).iter().enumerate() {
+        for e in self.extents_in(from, to) {
             let (lo, hi) = (from.max(e.image_off), to.min(e.image_off + e.image_len));
             if e.kind != EXTENT_TILE {
                 self.pread(lo as usize, (hi - lo) as usize, e.stored_off + (lo - e.image_off))?;
                 continue;
             }
-            let k = k + self.extents.partition_point(|x| x.image_off + x.image_len <= from);
             if lo == e.image_off && hi == e.image_off + e.image_len {
                 // SAFETY: the destination lies inside the mapping, and no reader reads it
                 // until the load is published (see the `Sync` note).
@@ -353,28 +344,13 @@ impl Region {
                 self.decode_tile(e, out)?;
                 continue;
             }
-            self.decoded(k, e, |tile| {
-                let part = &tile[(lo - e.image_off) as usize..(hi - e.image_off) as usize];
-                // SAFETY: as above.
-                unsafe { std::ptr::copy_nonoverlapping(part.as_ptr(), self.ptr.add(lo as usize), part.len()) };
-            })?;
+            let mut tile = vec![0u8; e.image_len as usize];
+            self.decode_tile(e, &mut tile)?;
+            let part = &tile[(lo - e.image_off) as usize..(hi - e.image_off) as usize];
+            // SAFETY: as above.
+            unsafe { std::ptr::copy_nonoverlapping(part.as_ptr(), self.ptr.add(lo as usize), part.len()) };
         }
         Ok(())
-    }
-
-    /// Calls `f` with extent `k`'s decoded tile, decoded once for consecutive asks on a thread.
-    fn decoded(&self, k: usize, e: &Extent, f: impl FnOnce(&[u8])) -> io::Result<()> {
-        DECODED.with(|d| {
-            let mut d = d.borrow_mut();
-            if d.0 != self.id || d.1 != k || d.2.len() != e.image_len as usize {
-                let mut tile = std::mem::take(&mut d.2);
-                tile.resize(e.image_len as usize, 0);
-                self.decode_tile(e, &mut tile)?;
-                *d = (self.id, k, tile);
-            }
-            f(&d.2);
-            Ok(())
-        })
     }
 
     /// Decodes tile extent `e` into `out` (its image length): zeros where the stored tile

@@ -482,17 +482,6 @@ impl Scene {
         })
     }
 
-    /// Bytes of the levels of detail: their tiles and attribute arrays.
-    pub fn lod_bytes(&self) -> u64 {
-        self.parts()[self.full_part_count() as usize..]
-            .iter()
-            .map(|p| {
-                let attrs = [(p.normals_off, 12), (p.uvs_off, 24), (p.colors_off, 12), (p.materials_off, 4)];
-                p.tile_bytes + attrs.iter().filter(|a| a.0 != 0).map(|a| a.1 * p.slot_count).sum::<u64>()
-            })
-            .sum()
-    }
-
     /// A compact file's extents (`compact.rs`); empty for a file that is its own image.
     pub fn extents(&self) -> &[Extent] {
         self.backing.extents()

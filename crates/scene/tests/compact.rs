@@ -133,6 +133,12 @@ fn the_image_is_the_plain_file() {
         let (o, l) = (ranges[0].0 as usize, ranges[0].1 as usize);
         assert!(s.bytes()[o..o + l].iter().all(|&b| b == 0), "tile {t} released");
     }
+    // A range cutting through a tile (no pager asks so) reads the same bytes.
+    let e = s.tiles()[1];
+    let (o, l) = (e.offset + 300, e.bytes as u64 - 700);
+    s.load(o, l).unwrap();
+    assert!(s.bytes()[o as usize..(o + l) as usize] == plain_bytes[o as usize..(o + l) as usize]);
+    s.release(o, l).unwrap();
 }
 
 /// Rewrites the header's checksum after a change to it.
