@@ -128,10 +128,19 @@ struct Display {
 }
 
 fn display() -> Display {
+    // A display is taken while the server named in its lock file runs. Servers killed (as
+    // `Proc` kills them) leave their lock and socket behind; Xvfb replaces such stale ones.
+    let live = |n: u32| {
+        std::fs::read_to_string(format!("/tmp/.X{n}-lock"))
+            .ok()
+            .and_then(|pid| pid.trim().parse::<u32>().ok())
+            .is_some_and(|pid| Path::new(&format!("/proc/{pid}")).exists())
+    };
     for n in 40..90 {
-        if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists() || Path::new(&format!("/tmp/.X{n}-lock")).exists() {
+        if live(n) {
             continue;
         }
+        let _ = std::fs::remove_file(format!("/tmp/.X11-unix/X{n}"));
         let name = format!(":{n}");
         let child = Command::new("Xvfb")
             .args([&name, "-screen", "0", "800x600x24", "-nolisten", "tcp"])
