@@ -365,9 +365,12 @@ impl Browser {
     }
 }
 
-/// What the page shows: frames received, the distinct colours of its canvas, the eye.
+/// What the page shows: frames received, the distinct colours of its canvas (copied onto a
+/// canvas of the test's own: the page's draws with a bitmap renderer), the eye.
 const PAGE_STATE: &str = "(() => { const c = document.getElementById('view'); \
-    const d = c.width ? c.getContext('2d').getImageData(0, 0, c.width, c.height).data : []; \
+    const t = document.createElement('canvas'); t.width = c.width; t.height = c.height; \
+    const g = t.getContext('2d'); if (c.width) g.drawImage(c, 0, 0); \
+    const d = c.width ? g.getImageData(0, 0, c.width, c.height).data : []; \
     const seen = new Set(); for (let i = 0; i < d.length; i += 4) seen.add(d[i] << 16 | d[i+1] << 8 | d[i+2]); \
     const m = window.megaray; return { frames: m.frames, colours: seen.size, closed: m.closed, \
     eye: m.stats ? m.stats.eye : null, width: c.width }; })()";
