@@ -611,14 +611,18 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
     let aovs = r.settings.aovs;
     if !aovs {
         // Bands of rows, each written in place: within a band, 32-pixel columns a row's
-        // group at a time (`rows`). No per-tile buffers, no copies.
+        // group at a time (`rows`). No per-tile buffers, no copies. Bands go in order to
+        // whichever thread is free (`par_bridge`), so the threads trace neighbouring bands,
+        // whose scene data the caches then share (rayon's split by halves gave each thread
+        // a far part of the image: docs/PERF.md, "Neighbouring bands").
         let mut f = r.blank_frame(w, h, false);
         let band = (BAND_ROWS * w) as usize;
         f.rays = f
             .image
             .pixels
-            .par_chunks_mut(band)
+            .chunks_mut(band)
             .enumerate()
+            .par_bridge()
             .map(|(b, px)| {
                 let mut caster = tracer;
                 let y0 = b as u32 * BAND_ROWS;
@@ -646,10 +650,13 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
     let tiles_x = w.div_ceil(TILE);
     let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE)).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
     // Per tile: its pixels in row order (and AOVs only when asked: the buffers are rebuilt
-    // every frame, so they are kept small).
-    let results: Vec<TileOut> = tiles
-        .par_iter()
-        .map(|&(tx, ty)| {
+    // every frame, so they are kept small). Tiles go in order to whichever thread is free,
+    // as bands do above; the results are put back in order after.
+    let mut results: Vec<(usize, TileOut)> = tiles
+        .iter()
+        .enumerate()
+        .par_bridge()
+        .map(|(i, &(tx, ty))| {
             let mut caster = tracer;
             let mut out = TileOut::default();
             for y in ty * TILE..((ty + 1) * TILE).min(h) {
@@ -664,12 +671,13 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
                     }
                 }
             }
-            out
+            (i, out)
         })
         .collect();
+    results.sort_unstable_by_key(|&(i, _)| i);
     let n = (w * h) as usize;
     let mut f = r.blank_frame(w, h, aovs);
-    for ((tx, ty), t) in tiles.iter().zip(results) {
+    for ((tx, ty), (_, t)) in tiles.iter().zip(results) {
         f.rays += t.rays;
         let (x0, x1) = (tx * TILE, ((tx + 1) * TILE).min(w));
         let tw = (x1 - x0) as usize;
