@@ -9,6 +9,7 @@ mod cmd;
 mod fault;
 mod info;
 mod inputs;
+mod jpeg;
 mod open;
 mod paging;
 mod pick;
