@@ -14,7 +14,8 @@
 //! 3. **Parts** ([`bvh`], [`tiles`]): each stream small enough is loaded and built in core
 //!    (binned SAH, collapsed to an 8-wide BVH), cut into page-aligned tiles and appended to the
 //!    scene file with its attributes. Parts build in parallel, as many at once as threads, each
-//!    sized so that all of them fit `build_mem` together. The builder's largest arrays pass
+//!    sized so that all of them fit `build_mem` together, and are appended in order (the same
+//!    file whatever the threads' timing). The builder's largest arrays pass
 //!    from one part to the next ([`recycle_part`]) rather than being faulted in afresh, and
 //!    are freed when the build ends ([`release_spare`]).
 //! 4. **Top level**: a BVH over the parts' boxes, written first in the file.
@@ -41,7 +42,7 @@ pub mod stream;
 pub mod tiles;
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -369,12 +370,30 @@ pub fn build_objects(
     progress.stage("build parts", triangles);
     let single = parts.len() == 1;
     let (attrs, components) = (&attrs, &components);
-    let built = pool.install(|| {
-        use rayon::prelude::*;
-        parts.par_iter().enumerate().with_max_len(1).try_for_each(|(i, p)| -> Result<(), BuildError> {
-            check_cancel(opts)?;
-            let (blob, lods) = build_part(p, attrs, components, opts, single, &io)?;
-            let n = blob.tri_count;
+    // Parts are taken in order by whichever thread is free and written in order, so the file
+    // is the same bytes whatever the threads' timing. A thread whose part is built ahead of
+    // its turn holds it (no more memory than while building it) and, while it waits, runs
+    // the pending tasks of the parts still building (each part's tree is built with rayon
+    // tasks when there are several threads), so the waiting costs little.
+    let next = AtomicUsize::new(0);
+    let turn = InOrder::default();
+    let parallel = single || opts.threads > 1;
+    let built: Vec<Result<(), BuildError>> = pool.broadcast(|_| loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        if i >= parts.len() || turn.failed() {
+            return Ok(());
+        }
+        let p = &parts[i];
+        let (blob, lods) = match check_cancel(opts).and_then(|_| build_part(p, attrs, components, opts, parallel, &io))
+        {
+            Ok(b) => b,
+            Err(e) => return Err(turn.fail(e)),
+        };
+        if !turn.wait_for(i) {
+            return Ok(());
+        }
+        let n = blob.tri_count;
+        let wrote = (|| {
             let mut w = writer.lock().unwrap_or_else(|e| e.into_inner());
             w.append_part(i as u32, &blob)?;
             for (k, (error, lod)) in lods.into_iter().enumerate() {
@@ -382,16 +401,19 @@ pub fn build_objects(
                 lod_count.fetch_add(1, Ordering::Relaxed);
                 recycle_part(lod);
             }
-            drop(w);
-            recycle_part(blob);
-            let _ = std::fs::remove_file(&p.path);
-            progress.inc(n);
-            Ok(())
-        })
+            Ok::<(), BuildError>(())
+        })();
+        if let Err(e) = wrote {
+            return Err(turn.fail(e));
+        }
+        turn.done(i);
+        recycle_part(blob);
+        let _ = std::fs::remove_file(&p.path);
+        progress.inc(n);
     });
     // The arrays kept from part to part are not kept past the build.
     release_spare();
-    built?;
+    built.into_iter().collect::<Result<Vec<()>, BuildError>>()?;
     progress.finish();
     let writer = writer.into_inner().unwrap_or_else(|e| e.into_inner());
     let tiles = writer.tile_count();
@@ -424,6 +446,49 @@ pub fn build_objects(
         parts_s,
         total_s: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// A part built: its tree and its levels of detail (error, level).
+type Built = (PartBlob, Vec<(f32, PartBlob)>);
+
+/// Whose turn it is to write, for threads that build parts out of order and write them in
+/// order. A failure ends every wait.
+#[derive(Default)]
+struct InOrder {
+    /// The next part to write, and whether a part failed.
+    state: Mutex<(usize, bool)>,
+}
+
+impl InOrder {
+    /// Waits, running the pool's pending tasks meanwhile, until part `i` may be written;
+    /// false once any part failed.
+    fn wait_for(&self, i: usize) -> bool {
+        loop {
+            match *self.state.lock().unwrap_or_else(|e| e.into_inner()) {
+                (_, true) => return false,
+                (next, false) if next == i => return true,
+                _ => {}
+            }
+            if rayon::yield_now() != Some(rayon::Yield::Executed) {
+                std::thread::sleep(std::time::Duration::from_micros(100));
+            }
+        }
+    }
+
+    /// Part `i` is written: the next may go.
+    fn done(&self, i: usize) {
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).0 = i + 1;
+    }
+
+    /// Records a failure and gives `e` back.
+    fn fail(&self, e: BuildError) -> BuildError {
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).1 = true;
+        e
+    }
+
+    fn failed(&self) -> bool {
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).1
+    }
 }
 
 /// Imports one model file into the build's sink; returns the bytes read.
@@ -502,7 +567,7 @@ fn build_part(
     opts: &BuildOptions,
     parallel: bool,
     io: &split::IoCount,
-) -> Result<(PartBlob, Vec<(f32, PartBlob)>), BuildError> {
+) -> Result<Built, BuildError> {
     let mut recs = vec![StreamTri { v: [[0.0; 3]; 3], reserved: 0, id: 0 }; s.count as usize];
     let mut r = StreamReader::open(s)?;
     let mut at = 0;

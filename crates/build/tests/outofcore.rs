@@ -146,3 +146,18 @@ fn attributes_follow_their_triangles_through_the_splits() {
         assert!(seen > 1000, "{seen} hits");
     }
 }
+
+/// Parts finish in any order on several threads, but are written in order: the same model
+/// gives the same file, byte for byte, on one thread or several, build after build.
+#[test]
+fn a_scene_file_is_the_same_bytes_whatever_the_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let build = |name: &str, threads: usize| {
+        let opts = megaray_build::BuildOptions { max_part_tris: Some(1000), threads, ..test_options() };
+        std::fs::read(build_with(dir.path(), &[model("spot.obj")], name, opts).0).unwrap()
+    };
+    let one = build("t1", 1);
+    for (k, threads) in [2, 3, 4, 3, 2, 4].into_iter().enumerate() {
+        assert!(build(&format!("t{threads}-{k}"), threads) == one, "{threads} threads (build {k}) wrote other bytes");
+    }
+}

@@ -55,7 +55,7 @@ fn corrupt_scene_files() {
     let scene = megaray_scene::Scene::open(&good).unwrap();
     let t = scene.tiles()[scene.parts()[0].root_tile as usize];
     let mut b = bytes.clone();
-    b[t.offset as usize + 200] ^= 0x40;
+    b[megaray_testkit::stored_offset(&scene, t.offset + 200) as usize] ^= 0x40;
     let p = write("tile.mray", &b);
     fails(&["render", &p, "-o", o, "--res", "64x64"], &["tile.mray", "tile", "checksum"]);
     fails(&["info", "--verify", &p], &["tile.mray", "checksum"]);
@@ -163,14 +163,16 @@ fn random_byte_flips_never_panic() {
         .map(|e| (e.stored_off, e.stored_len))
         .collect();
     assert!(!tiles.is_empty(), "the test scene is compact");
+    // The header page and the tables before the first tile (the top-level tree, the parts).
+    let tables = tiles.iter().map(|t| t.0).min().unwrap().min(16384);
     let mut rng = Rng(99);
     let (mut open_errors, mut tile_errors) = (0, 0);
     for i in 0..300 {
         let mut b = bytes.clone();
-        // A third of the flips in the first pages (header, tables), a third in a tile's stored
-        // bytes, a third anywhere.
+        // A third of the flips in the header and the tables before the tiles, a third in a
+        // tile's stored bytes, a third anywhere.
         let at = match i % 3 {
-            0 => (rng.next_u64() % 16384) as usize,
+            0 => (rng.next_u64() % tables) as usize,
             1 => {
                 let (off, len) = tiles[(rng.next_u64() % tiles.len() as u64) as usize];
                 (off + rng.next_u64() % len) as usize
