@@ -147,8 +147,9 @@ fn attributes_follow_their_triangles_through_the_splits() {
     }
 }
 
-/// Parts finish in any order on several threads, but are written in order: the same model
-/// gives the same file, byte for byte, on one thread or several, build after build.
+/// Parts finish in any order on several threads, but are written in order: with the part
+/// size fixed, the same model gives the same file, byte for byte, on one thread or several,
+/// build after build.
 #[test]
 fn a_scene_file_is_the_same_bytes_whatever_the_threads() {
     let dir = tempfile::tempdir().unwrap();
