@@ -571,7 +571,17 @@ impl Shared {
     /// Makes room for tile `t` (evicting), reads and checks it, and publishes it.
     fn load(&self, t: u32) {
         let cost = self.cost[t as usize];
-        let victims = self.make_room(cost);
+        let Some(victims) = self.make_room(t, cost) else {
+            // Loaded meanwhile, or its pages are being released by another fetcher: the
+            // fetch loop's checks again, after a pause for the latter.
+            if self.state[t as usize].load(SeqCst) & EVICTING != 0 {
+                lock(&self.queue).push(t);
+                std::thread::sleep(Duration::from_micros(200));
+            } else {
+                self.state[t as usize].fetch_and(!REQ, SeqCst);
+            }
+            return;
+        };
         if !victims.is_empty() {
             self.synchronize();
             for &v in &victims {
@@ -610,7 +620,8 @@ impl Shared {
                 // Referenced and fresh: a tile just loaded for waiting rays is not evicted
                 // before they used it (or FRESH_MS passed).
                 self.loaded_at[t as usize].store(self.start.elapsed().as_millis() as u64, Relaxed);
-                word.fetch_or(AVAIL | REFD | FRESH, SeqCst);
+                let prev = word.fetch_or(AVAIL | REFD | FRESH, SeqCst);
+                debug_assert!(prev & (AVAIL | EVICTING) == 0, "tile {t} published twice");
                 word.fetch_and(!REQ, SeqCst);
             }
             Err(e) => {
@@ -632,8 +643,13 @@ impl Shared {
     /// Reserves `cost` bytes for a tile about to load, choosing victims by the clock until
     /// the reservation fits (evicting down to the low watermark once over the budget).
     /// Victims are no longer available when this returns; their pages are still mapped.
-    fn make_room(&self, cost: u64) -> Vec<u32> {
+    /// `None` if tile `t` is available or still being released (checked under the clock
+    /// lock, under which EVICTING is set: exact).
+    fn make_room(&self, t: u32, cost: u64) -> Option<Vec<u32>> {
         let mut c = lock(&self.clock);
+        if self.state[t as usize].load(SeqCst) & (AVAIL | EVICTING | CORRUPT) != 0 {
+            return None;
+        }
         let mut victims = Vec::new();
         let low = (self.tile_budget - self.tile_budget / 16).saturating_sub(cost);
         let n = self.state.len();
@@ -672,18 +688,19 @@ impl Shared {
                 }
                 // Evict: no longer available (new lookups miss), pages released after the
                 // grace period.
-                let prev = word.fetch_and(!AVAIL, SeqCst);
-                if prev & AVAIL == 0 {
+                // In one step: a state with neither bit would let another fetcher load the
+                // tile again, and this one's release would then drop the fresh pages.
+                let evict = |s: u32| (s & AVAIL != 0).then_some((s & !AVAIL) | EVICTING);
+                if word.fetch_update(SeqCst, SeqCst, evict).is_err() {
                     continue;
                 }
-                word.fetch_or(EVICTING, SeqCst);
                 c.bytes -= self.cost[v];
                 victims.push(v as u32);
             }
         }
         c.bytes += cost;
         self.peak.fetch_max(c.bytes, Relaxed);
-        victims
+        Some(victims)
     }
 
     /// Drops tile `t`'s pages from this process.
@@ -692,5 +709,50 @@ impl Shared {
         for (o, l) in self.scene.tile_ranges(t).unwrap_or_default() {
             let _ = self.scene.release(o, l);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fetcher asked to load a tile that another is evicting (no longer available, its
+    /// pages not yet released) leaves it alone and asks again later: were it to load it, the
+    /// other's release would leave an available tile of zeros.
+    #[test]
+    fn a_tile_being_evicted_is_not_loaded_again_until_released() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = megaray_testkit::gen(dir.path(), "plant:60k");
+        let (path, _) = megaray_testkit::build_without_lod(dir.path(), &[ply], "paged", Some(20_000));
+        let pager = Pager::open(&path, PagerOptions { budget: 1 << 30, fetchers: 1 }).unwrap();
+        let s = &pager.shared;
+        let t = 3;
+        while pager.acquire(t) != Access::Ready {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        // What an evicting fetcher does under the clock lock ...
+        {
+            let mut c = lock(&s.clock);
+            let evict = |w: u32| (w & AVAIL != 0).then_some((w & !AVAIL) | EVICTING);
+            s.state[t as usize].fetch_update(SeqCst, SeqCst, evict).unwrap();
+            c.bytes -= s.cost[t as usize];
+        }
+        // ... while another is asked for the tile and loads it.
+        let releases = pager.release_count(t);
+        s.state[t as usize].fetch_or(REQ, SeqCst);
+        s.load(t);
+        assert_eq!(s.state[t as usize].load(SeqCst) & AVAIL, 0, "loaded while being evicted");
+        assert_ne!(s.state[t as usize].load(SeqCst) & REQ, 0, "no longer asked for");
+        assert_eq!(pager.release_count(t), releases);
+        // The evicting fetcher finishes; the tile loads again whole.
+        s.release(t);
+        s.state[t as usize].fetch_and(!EVICTING, SeqCst);
+        s.queue_cv.notify_all();
+        while pager.acquire(t) != Access::Ready {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let _pin = pager.pin();
+        s.scene.check_tile(t).unwrap();
+        assert!(pager.first_error().is_none());
     }
 }

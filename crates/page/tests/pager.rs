@@ -137,3 +137,52 @@ fn the_coarsest_levels_are_pinned() {
     assert!(pinned.iter().all(|&t| pager.is_resident(t)), "a coarsest tile was evicted");
     assert!(st.pinned > 0 && st.peak_resident <= st.tile_budget, "{st:?}");
 }
+
+/// Many threads asking for tiles at random under a budget of one tile more than the least,
+/// with many fetchers evicting at once: a tile found available always holds its checked
+/// bytes, and every tile available at the end does too. (A fetcher could once load a tile
+/// again while another, evicting it, had yet to release its pages: the release then left an
+/// available tile of zeros.)
+#[test]
+fn tiles_found_available_hold_their_bytes_under_many_fetchers() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = scene_file(dir.path());
+    let probe = Scene::open(&path).unwrap();
+    let biggest = probe.tiles().iter().map(|e| e.bytes as u64).max().unwrap();
+    let budget = Pager::min_budget(&probe) + biggest;
+    drop(probe);
+    let pager = Pager::open(&path, PagerOptions { budget, fetchers: 8 }).unwrap();
+    let scene = pager.scene().clone();
+    let n = scene.tiles().len() as u32;
+    std::thread::scope(|s| {
+        for k in 0..12u64 {
+            let (pager, scene) = (&pager, &scene);
+            s.spawn(move || {
+                // A few tiles again and again, so that loads and evictions of the same tile
+                // meet: xorshift over the first eight tiles and the rest.
+                let mut x = 0x9e37_79b9_7f4a_7c15u64 ^ (k + 1).wrapping_mul(0x2545_f491_4f6c_dd1d);
+                for _ in 0..20_000 {
+                    x ^= x << 13;
+                    x ^= x >> 7;
+                    x ^= x << 17;
+                    let t = if x % 4 == 0 { (x >> 8) as u32 % n } else { (x >> 8) as u32 % n.min(8) };
+                    let _pin = pager.pin();
+                    match pager.acquire(t) {
+                        Access::Ready => {
+                            scene.check_tile(t).unwrap_or_else(|e| panic!("tile {t} found available: {e}"))
+                        }
+                        Access::Missing => std::thread::yield_now(),
+                        Access::Corrupt => panic!("tile {t} corrupt: {:?}", pager.first_error()),
+                    }
+                }
+            });
+        }
+    });
+    std::thread::sleep(Duration::from_millis(50));
+    let _pin = pager.pin();
+    for t in (0..n).filter(|&t| pager.is_resident(t)) {
+        scene.check_tile(t).unwrap_or_else(|e| panic!("tile {t} resident at the end: {e}"));
+    }
+    let st = pager.stats();
+    assert!(st.evicted > 100 && pager.first_error().is_none(), "{st:?}");
+}

@@ -216,6 +216,7 @@ impl<'t, 's> Replay<'t, 's> {
             None if any => tracer.try_occluded(ray),
             None => tracer.try_intersect(ray),
         };
+        let mut resumed = false;
         let traced = if self.cursor < self.log.len() {
             let same = |r: &Ray| r.org == ray.org && r.dir == ray.dir && r.t_min == ray.t_min && r.t_max == ray.t_max;
             match &self.log[self.cursor] {
@@ -243,6 +244,7 @@ impl<'t, 's> Replay<'t, 's> {
                     let Logged::Pending(_, p) = self.log.swap_remove(self.cursor) else { unreachable!() };
                     // swap_remove moved the last entry here; the pending one was the last
                     // (a job stops at its first pending ray), so nothing moved.
+                    resumed = true;
                     match cone {
                         Some(c) => self.tracer.try_cone(ray, any, c, Some(p)),
                         None => self.tracer.resume(ray, p),
@@ -263,6 +265,15 @@ impl<'t, 's> Replay<'t, 's> {
         match traced {
             Traced::Done(h) => {
                 self.log.push(if any { Logged::Occluded(*ray, h.is_some()) } else { Logged::Hit(*ray, h) });
+                if let (true, Some(t)) = (resumed && !any, h.and_then(|h| self.attribute_tile(&h))) {
+                    // A resumed ray's hit may be the one found before it was suspended, in a
+                    // tile evicted since: as a logged hit, the tile resident or the job waits
+                    // (the run after finds the hit in the log).
+                    if self.tracer.pager().is_some_and(|p| p.acquire(t) == megaray_page::Access::Missing) {
+                        self.waiting = Some(t);
+                        return Err(Suspended);
+                    }
+                }
                 self.cursor += 1;
                 Ok(if any { h.map(|_| HIT_ANY) } else { h })
             }
