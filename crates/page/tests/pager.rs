@@ -165,7 +165,7 @@ fn tiles_found_available_hold_their_bytes_under_many_fetchers() {
                     x ^= x << 13;
                     x ^= x >> 7;
                     x ^= x << 17;
-                    let t = if x % 4 == 0 { (x >> 8) as u32 % n } else { (x >> 8) as u32 % n.min(8) };
+                    let t = if x.is_multiple_of(4) { (x >> 8) as u32 % n } else { (x >> 8) as u32 % n.min(8) };
                     let _pin = pager.pin();
                     match pager.acquire(t) {
                         Access::Ready => {
