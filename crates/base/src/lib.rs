@@ -59,6 +59,18 @@ pub fn prefetch_addr(p: *const u8) {
     let _ = p;
 }
 
+/// Colour pixels seen as atomics, for threads that each write a disjoint set of them (a
+/// frame's interleaved pixel groups, written where they finish): a relaxed store is a plain
+/// store, and the `&mut` borrow held meanwhile keeps every other access out.
+pub fn pixels_as_atomic(px: &mut [[f32; 3]]) -> &[[std::sync::atomic::AtomicU32; 3]] {
+    use std::sync::atomic::AtomicU32;
+    const _: () = assert!(std::mem::size_of::<AtomicU32>() == 4 && std::mem::align_of::<AtomicU32>() == 4);
+    // SAFETY: a byte cast: `AtomicU32` has the size and alignment of `u32`, hence of `f32`
+    // (asserted above), and any bits are a valid `u32`. The exclusive borrow of `px` lasts
+    // as long as the result, so no access but through the atomics can happen meanwhile.
+    unsafe { std::slice::from_raw_parts(px.as_mut_ptr().cast::<[AtomicU32; 3]>(), px.len()) }
+}
+
 /// The lowbias32 integer hash: deterministic per-pixel random numbers (the Embree peer
 /// harness uses the same one, so ray sets can be compared).
 #[inline]

@@ -62,7 +62,7 @@ pub struct Renderer {
 #[derive(Default)]
 struct Spare {
     pixels: Vec<[f32; 3]>,
-    groups: jobs::JobsBuffers<rows::GroupOut>,
+    groups: jobs::JobsBuffers<rows::GroupDone>,
 }
 
 impl std::ops::Deref for Renderer {
@@ -107,10 +107,11 @@ impl Renderer {
         self.spare.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// A black `w` x `h` frame (AOV buffers when `aovs`), in a recycled image buffer when
-    /// there is one of its size.
-    fn blank_frame(&self, w: u32, h: u32, aovs: bool) -> Frame {
-        Frame::blank_in(std::mem::take(&mut self.spare().pixels), w, h, aovs)
+    /// A `w` x `h` frame (AOV buffers when `aovs`), in a recycled image buffer when there
+    /// is one of its size: black if `black`, else its pixels left as they were (for a
+    /// frame loop that writes every pixel, or blackens those it leaves).
+    fn blank_frame(&self, w: u32, h: u32, aovs: bool, black: bool) -> Frame {
+        Frame::blank_in(std::mem::take(&mut self.spare().pixels), w, h, aovs, black)
     }
 
     /// Lights the scene with `env` (what misses see, and the lights of every shader).
@@ -343,15 +344,17 @@ pub struct Frame {
 impl Frame {
     /// A black `w` x `h` frame, with zeroed AOV buffers when `aovs`.
     pub(crate) fn blank(w: u32, h: u32, aovs: bool) -> Frame {
-        Frame::blank_in(Vec::new(), w, h, aovs)
+        Frame::blank_in(Vec::new(), w, h, aovs, true)
     }
 
-    /// [`Frame::blank`], its image in `pixels` (zeroed) when they are `w * h`.
-    fn blank_in(mut pixels: Vec<[f32; 3]>, w: u32, h: u32, aovs: bool) -> Frame {
+    /// [`Frame::blank`], its image in `pixels` when they are `w * h` (zeroed if `black`).
+    fn blank_in(mut pixels: Vec<[f32; 3]>, w: u32, h: u32, aovs: bool, black: bool) -> Frame {
         let n = (w * h) as usize;
         let image = match pixels.len() == n {
             true => {
-                pixels.fill([0.0; 3]);
+                if black {
+                    pixels.fill([0.0; 3]);
+                }
                 Image { width: w, height: h, pixels }
             }
             false => Image::new(w, h),
@@ -499,7 +502,8 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     let max_parked = if opts.deadline.is_some() { jobs::MAX_PARKED_DEADLINE } else { jobs::MAX_PARKED };
     let n = (w * h) as usize;
     let aovs = r.settings.aovs;
-    let mut f = r.blank_frame(w, h, aovs);
+    // Pixels the frame leaves are blackened below.
+    let mut f = r.blank_frame(w, h, aovs, false);
     let mut finished: Vec<u32> = Vec::new();
     let mut approx: Vec<u32> = Vec::new();
     // Jobs in the order of rows' groups (`rows`): tiles, and against a deadline interleaved
@@ -531,23 +535,38 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
             f.albedo[p] = s.albedo.to_array();
         }
     } else {
-        // A group a job.
+        // A group a job, its pixels written into the image where it finishes (a group's
+        // are its own: interleaved groups scattered over the image would be gathered back
+        // from their threads' results at random).
         let job_opts = JobOptions { chunk: 8, deadline: opts.deadline, max_parked, stand_in: opts.stand_in };
         let spare = std::mem::take(&mut r.spare().groups);
-        let run =
-            jobs::run_reusing(tracer, groups.len(), &job_opts, |i, caster| r.group(groups[i], frame, caster), spare);
+        let image = megaray_base::pixels_as_atomic(&mut f.image.pixels);
+        let run = jobs::run_reusing(
+            tracer,
+            groups.len(),
+            &job_opts,
+            |i, caster| {
+                let (g, out) = (groups[i], r.group(groups[i], frame, caster)?);
+                for k in 0..g.len as usize {
+                    let px = &image[g.index(k, w)];
+                    for c in 0..3 {
+                        px[c].store(out.rgb[k][c].to_bits(), Ordering::Relaxed);
+                    }
+                }
+                Ok(rows::GroupDone { rays: out.rays, approx: out.approx })
+            },
+            spare,
+        );
         f.jobs = run.stats;
         let partial = f.jobs.unfinished > 0;
         let mut pixels = 0u64;
-        let outs: Vec<(usize, &rows::GroupOut)> = run.finished().collect();
-        // The finished groups by row (a counting sort), then written into the image by bands
-        // of rows on all threads: a pass's groups are scattered over the whole image.
-        let mut start = vec![0u32; h as usize + 1];
-        for (i, out) in &outs {
-            let g = groups[*i];
-            start[g.y as usize + 1] += 1;
+        for (i, out) in run.finished() {
+            let g = groups[i];
             f.rays += out.rays as u64;
             pixels += g.len as u64;
+            if !partial && out.approx == 0 {
+                continue;
+            }
             for k in 0..g.len as usize {
                 let p = g.index(k, w) as u32;
                 if partial {
@@ -558,31 +577,8 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
                 }
             }
         }
-        for y in 0..h as usize {
-            start[y + 1] += start[y];
-        }
-        let mut by_row = vec![0u32; outs.len()];
-        let mut at = start.clone();
-        for (j, (i, _)) in outs.iter().enumerate() {
-            let y = groups[*i].y as usize;
-            by_row[at[y] as usize] = j as u32;
-            at[y] += 1;
-        }
-        f.image.pixels.par_chunks_mut((BAND_ROWS * w) as usize).enumerate().for_each(|(b, px)| {
-            let y0 = b as u32 * BAND_ROWS;
-            for y in y0..y0 + px.len() as u32 / w {
-                for &j in &by_row[start[y as usize] as usize..start[y as usize + 1] as usize] {
-                    let (i, out) = &outs[j as usize];
-                    let g = groups[*i];
-                    for k in 0..g.len as usize {
-                        px[g.index(k, w) - (y0 * w) as usize] = out.rgb[k];
-                    }
-                }
-            }
-        });
         // The loop's counts are of jobs; the frame's, of pixels.
         (f.jobs.finished, f.jobs.unfinished) = (pixels, n as u64 - pixels);
-        drop(outs);
         r.spare().groups = run.into_buffers();
     }
     if !approx.is_empty() {
@@ -595,6 +591,9 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
         f.done = vec![false; n];
         for p in finished {
             f.done[p as usize] = true;
+        }
+        for (px, _) in f.image.pixels.iter_mut().zip(&f.done).filter(|(_, &d)| !d) {
+            *px = [0.0; 3];
         }
         if opts.stand_in {
             f.filled = fill_unfinished(&mut f);
@@ -615,7 +614,8 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
         // whichever thread is free (`par_bridge`), so the threads trace neighbouring bands,
         // whose scene data the caches then share (rayon's split by halves gave each thread
         // a far part of the image: docs/PERF.md, "Neighbouring bands").
-        let mut f = r.blank_frame(w, h, false);
+        // Every pixel written below.
+        let mut f = r.blank_frame(w, h, false, false);
         let band = (BAND_ROWS * w) as usize;
         f.rays = f
             .image
@@ -676,7 +676,8 @@ fn render_in_core(r: &Renderer, tracer: &Tracer, frame: u32) -> Frame {
         .collect();
     results.sort_unstable_by_key(|&(i, _)| i);
     let n = (w * h) as usize;
-    let mut f = r.blank_frame(w, h, aovs);
+    // Every pixel written below.
+    let mut f = r.blank_frame(w, h, aovs, false);
     for ((tx, ty), (_, t)) in tiles.iter().zip(results) {
         f.rays += t.rays;
         let (x0, x1) = (tx * TILE, ((tx + 1) * TILE).min(w));

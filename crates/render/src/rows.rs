@@ -35,8 +35,14 @@ impl Group {
     }
 }
 
-/// A group's result: its pixels' colours, the rays they fired, which of them a stand-in
-/// answered (bit `k`: pixel `k`). Kept small: a frame's results are gathered every frame.
+/// What the frame loop keeps of a finished group whose pixels it has written: the rays
+/// they fired, which of them a stand-in answered (bit `k`: pixel `k`).
+pub(crate) struct GroupDone {
+    pub rays: u32,
+    pub approx: u16,
+}
+
+/// A group's result: its pixels' colours, and as [`GroupDone`].
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct GroupOut {
     pub rgb: [[f32; 3]; GROUP],
@@ -69,10 +75,14 @@ pub(crate) fn tile_groups(w: u32, h: u32, backward: bool) -> Vec<Group> {
     out
 }
 
-/// The groups of a frame against a deadline: the passes of [`crate::frame::PASSES`] (one pixel
-/// of every 4x4 block a pass); within a pass, bands of 32 rows (a row of tiles), each row of
-/// the band across pairs of tiles (a group's 16 pixels, 4 apart, span 64: two tiles), bands
-/// and pairs backward when `backward`.
+/// The groups of a frame against a deadline: the first pass of [`crate::frame::PASSES`] (one
+/// pixel of every 4x4 block) over the whole image, then band by band (32 rows, a row of tiles)
+/// the other fifteen passes. Within a band, each row across pairs of tiles (a group's 16
+/// pixels, 4 apart, span 64: two tiles); bands and pairs backward when `backward`. What a
+/// deadline leaves has a done pixel in every block (for [`crate::frame`]'s fill) once the
+/// first pass is done, while the rest of the frame goes through the image (and the scene)
+/// once, a band at a time: fifteen passes over the whole image made a frame read its image
+/// and scene data fifteen times (docs/PERF.md, "Deadline frames band by band").
 pub(crate) fn interleaved_groups(w: u32, h: u32, backward: bool) -> Vec<Group> {
     const SPAN: u32 = 2 * TILE;
     let mut blocks: Vec<(u32, u32)> =
@@ -81,10 +91,18 @@ pub(crate) fn interleaved_groups(w: u32, h: u32, backward: bool) -> Vec<Group> {
         blocks.reverse();
     }
     let mut out = Vec::new();
-    for &(dx, dy) in &crate::frame::PASSES {
-        for &(bx, ty) in &blocks {
-            for y in (ty * TILE + dy..((ty + 1) * TILE).min(h)).step_by(4) {
-                push_row(&mut out, y, (bx * SPAN + dx..((bx + 1) * SPAN).min(w)).step_by(4), 4);
+    let mut pass = |(dx, dy): (u32, u32), (bx, ty): (u32, u32)| {
+        for y in (ty * TILE + dy..((ty + 1) * TILE).min(h)).step_by(4) {
+            push_row(&mut out, y, (bx * SPAN + dx..((bx + 1) * SPAN).min(w)).step_by(4), 4);
+        }
+    };
+    for &b in &blocks {
+        pass(crate::frame::PASSES[0], b);
+    }
+    for band in blocks.chunk_by(|a, b| a.1 == b.1) {
+        for &p in &crate::frame::PASSES[1..] {
+            for &b in band {
+                pass(p, b);
             }
         }
     }

@@ -154,8 +154,12 @@ pub struct ViewCore<'t, 's> {
     sky_on: bool,
     renderer: Renderer,
     acc: Accumulator,
-    /// The last frame rendered while moving, and its size.
+    /// The last frame rendered while moving at a reduced size.
     preview: Option<Image>,
+    /// The last frame rendered while moving at the view's size (sample 0): shown as it is,
+    /// and the accumulator's first frame if the camera then stays still. Moving frames never
+    /// go through the accumulator (its sums are 84 bytes a pixel, read and written).
+    pending: Option<Frame>,
     /// The last denoised picture and the frames it was made of (the denoiser runs on the
     /// first 4 still frames and every 8th after, to keep its cost off most frames).
     denoised: Option<(u32, Image)>,
@@ -204,6 +208,7 @@ impl<'t, 's> ViewCore<'t, 's> {
             renderer: Renderer::new(RenderSettings::new(home.pose.camera(opts.fov, w, h)), &bounds),
             acc: Accumulator::new(w, h),
             preview: None,
+            pending: None,
             denoised: None,
             denoise_time: Duration::ZERO,
             scale: 0.5,
@@ -264,6 +269,7 @@ impl<'t, 's> ViewCore<'t, 's> {
             _ => r,
         };
         self.acc = Accumulator::new(w, h);
+        self.pending = None;
         self.moved = true;
     }
 
@@ -511,9 +517,19 @@ impl<'t, 's> ViewCore<'t, 's> {
         }
         let moving = std::mem::replace(&mut self.moved, false);
         if moving {
+            if let Some(f) = self.pending.take() {
+                self.renderer.recycle(f);
+            }
             self.acc.reset();
-        } else if self.acc.frames() >= self.opts.max_frames {
-            return false;
+        } else {
+            if let Some(f) = self.pending.take() {
+                // The camera stayed: the last moving frame is the first still one.
+                self.acc.add_frame(&f);
+                self.renderer.recycle(f);
+            }
+            if self.acc.frames() >= self.opts.max_frames {
+                return false;
+            }
         }
         let (w, h) = (self.opts.width, self.opts.height);
         // While moving (and only with a budget): a reduced resolution.
@@ -554,11 +570,15 @@ impl<'t, 's> ViewCore<'t, 's> {
         };
         let secs = t0.elapsed().as_secs_f64().max(1e-6);
         self.governor.after_frame(self.tracer);
-        if (rw, rh) == (w, h) {
-            self.acc.add_frame(&frame);
-            self.preview = None;
+        let (rays, approx) = (frame.rays, frame.approx.iter().filter(|&&a| a).count() as u64);
+        self.preview = None;
+        if (rw, rh) != (w, h) {
+            self.preview = Some(frame.image);
+        } else if moving {
+            self.pending = Some(frame);
         } else {
-            self.preview = Some(frame.image.clone());
+            self.acc.add_frame(&frame);
+            self.renderer.recycle(frame);
         }
         if moving {
             if let Some(b) = self.opts.frame_budget {
@@ -572,20 +592,19 @@ impl<'t, 's> ViewCore<'t, 's> {
         let smooth = |old: f64, new: f64| if old == 0.0 { new } else { 0.7 * old + 0.3 * new };
         self.stats = ViewStats {
             fps: smooth(self.stats.fps, 1.0 / secs),
-            mrays_s: smooth(self.stats.mrays_s, frame.rays as f64 / secs * 1e-6),
-            rays: frame.rays,
+            mrays_s: smooth(self.stats.mrays_s, rays as f64 / secs * 1e-6),
+            rays,
             frame_secs: secs,
             width: rw,
             height: rh,
-            frames: self.acc.frames(),
+            frames: self.acc.frames() + self.pending.is_some() as u32,
             resident: p.map_or(0, |s| s.resident + s.pinned),
             budget: p.map_or(0, |s| s.tile_budget + s.pinned),
             in_flight: p.map_or(0, |s| s.requested.saturating_sub(s.loaded + s.corrupt)),
             lod_error: self.tracer.lod_error(),
-            approx: frame.approx.iter().filter(|&&a| a).count() as u64,
+            approx,
             moving,
         };
-        self.renderer.recycle(frame);
         self.compose();
         true
     }
@@ -593,18 +612,23 @@ impl<'t, 's> ViewCore<'t, 's> {
     /// The picture shown now, before overlays: the accumulated frames, or the last preview
     /// scaled to the view's size.
     pub fn image(&self) -> Image {
-        match &self.preview {
-            Some(p) => upscale(p, self.opts.width, self.opts.height),
-            None => self.acc.image(),
+        match (&self.preview, &self.pending) {
+            (Some(p), _) => upscale(p, self.opts.width, self.opts.height),
+            (None, Some(f)) => f.image.clone(),
+            (None, None) => self.acc.image(),
         }
     }
 
     /// Makes the display: the picture tone mapped, the statistics line and the help over it.
     fn compose(&mut self) {
-        let (w, h) = (self.opts.width, self.opts.height);
         let frames = self.acc.frames();
-        let shown = match (&self.preview, self.opts.denoise) {
-            (None, true) => {
+        let shown = match (&self.preview, &self.pending, self.opts.denoise) {
+            (None, Some(f), _) => {
+                self.denoised = None;
+                self.display = f.image.to_srgb8_with(&ToneMap::default());
+                return self.overlay();
+            }
+            (None, None, true) => {
                 let stale = self.denoised.as_ref().is_none_or(|(n, _)| *n > frames || frames - n >= 16);
                 if (frames <= 4 || frames.is_multiple_of(8) || stale)
                     && self.denoised.as_ref().is_none_or(|(n, _)| *n != frames)
@@ -622,6 +646,12 @@ impl<'t, 's> ViewCore<'t, 's> {
             }
         };
         self.display = shown.to_srgb8_with(&ToneMap::default());
+        self.overlay();
+    }
+
+    /// Draws the statistics line, the picked point and the help over the display.
+    fn overlay(&mut self) {
+        let (w, h) = (self.opts.width, self.opts.height);
         let mut lines = Vec::new();
         if self.info {
             lines.push(self.stats_line());
