@@ -548,9 +548,8 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
             |i, caster| {
                 let (g, out) = (groups[i], r.group(groups[i], frame, caster)?);
                 for k in 0..g.len as usize {
-                    let px = &image[g.index(k, w)];
-                    for c in 0..3 {
-                        px[c].store(out.rgb[k][c].to_bits(), Ordering::Relaxed);
+                    for (px, c) in image[g.index(k, w)].iter().zip(out.rgb[k]) {
+                        px.store(c.to_bits(), Ordering::Relaxed);
                     }
                 }
                 Ok(rows::GroupDone { rays: out.rays, approx: out.approx })
