@@ -534,6 +534,17 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
             f.normal[p] = s.normal.to_array();
             f.albedo[p] = s.albedo.to_array();
         }
+    } else if tracer.pager().is_none() {
+        // Nothing can suspend (an unpaged tracer, against a deadline): no job bookkeeping.
+        let image = megaray_base::pixels_as_atomic(&mut f.image.pixels);
+        let (done, rays, apx) = groups_until(r, tracer, frame, &groups, opts.deadline, image);
+        let pixels: u64 = groups[..done].iter().map(|g| g.len as u64).sum();
+        if done < groups.len() {
+            finished.extend(groups[..done].iter().flat_map(|g| (0..g.len as usize).map(|k| g.index(k, w) as u32)));
+        }
+        approx = apx;
+        f.rays = rays;
+        f.jobs = JobStats { finished: pixels, unfinished: n as u64 - pixels, rays, ..JobStats::default() };
     } else {
         // A group a job, its pixels written into the image where it finishes (a group's
         // are its own: interleaved groups scattered over the image would be gathered back
@@ -547,11 +558,7 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
             &job_opts,
             |i, caster| {
                 let (g, out) = (groups[i], r.group(groups[i], frame, caster)?);
-                for k in 0..g.len as usize {
-                    for (px, c) in image[g.index(k, w)].iter().zip(out.rgb[k]) {
-                        px.store(c.to_bits(), Ordering::Relaxed);
-                    }
-                }
+                put_group(image, g, w, &out);
                 Ok(rows::GroupDone { rays: out.rays, approx: out.approx })
             },
             spare,
@@ -599,6 +606,54 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
         }
     }
     f
+}
+
+/// Writes group `g`'s pixels into `image` (`w` wide), which other threads write too (other
+/// groups' pixels).
+#[inline]
+fn put_group(image: &[[AtomicU32; 3]], g: rows::Group, w: u32, out: &rows::GroupOut) {
+    for k in 0..g.len as usize {
+        for (px, c) in image[g.index(k, w)].iter().zip(out.rgb[k]) {
+            px.store(c.to_bits(), Ordering::Relaxed);
+        }
+    }
+}
+
+/// The groups of frame `frame` on every thread of the pool, from a shared counter a chunk at
+/// a time until `deadline`, each written into `image` (`put_group`) as it finishes, when
+/// nothing can suspend (an unpaged tracer). Every chunk handed out is finished whole, so the
+/// groups done are a prefix: returns its length, the rays fired and the pixels a stand-in
+/// answered.
+fn groups_until(
+    r: &Renderer,
+    tracer: &Tracer,
+    frame: u32,
+    groups: &[rows::Group],
+    deadline: Option<Instant>,
+    image: &[[AtomicU32; 3]],
+) -> (usize, u64, Vec<u32>) {
+    const CHUNK: usize = 8;
+    let w = r.settings.camera.width;
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let per_thread = rayon::broadcast(|_| {
+        let (mut caster, mut rays, mut approx) = (tracer, 0u64, Vec::new());
+        while deadline.is_none_or(|d| Instant::now() < d) {
+            let start = next.fetch_add(CHUNK, Ordering::Relaxed);
+            if start >= groups.len() {
+                break;
+            }
+            for &g in &groups[start..(start + CHUNK).min(groups.len())] {
+                let out = r.group(g, frame, &mut caster).expect("a plain in-core Tracer never suspends");
+                put_group(image, g, w, &out);
+                rays += out.rays as u64;
+                approx.extend((0..g.len as usize).filter(|k| out.approx & (1 << k) != 0).map(|k| g.index(k, w) as u32));
+            }
+        }
+        (rays, approx)
+    });
+    let done = next.load(Ordering::Relaxed).min(groups.len());
+    let rays = per_thread.iter().map(|(r, _)| r).sum();
+    (done, rays, per_thread.into_iter().flat_map(|(_, a)| a).collect())
 }
 
 /// The frame loop when nothing can suspend (an unpaged tracer, no deadline): 32x32 tiles as

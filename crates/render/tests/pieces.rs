@@ -85,13 +85,32 @@ fn recycled_buffers_give_the_same_frames() {
             assert_eq!(bits(&again), bits(&fresh));
             assert_eq!((again.rays, again.jobs.finished), (fresh.rays, fresh.jobs.finished));
         }
-        // A deadline already past: pixels not done are black.
+        // A deadline far off: every pixel, as without one (the pixels in another order).
         r.recycle(render_frame(&r, &tracer, 6));
+        let far = FrameOptions {
+            deadline: Some(std::time::Instant::now() + std::time::Duration::from_secs(600)),
+            stand_in: false,
+        };
+        let f = render_frame_with(&r, &tracer, 5, &far);
+        assert_eq!(bits(&f), bits(&fresh));
+        assert_eq!((f.rays, f.jobs.finished, f.jobs.unfinished, f.filled), (fresh.rays, fresh.jobs.finished, 0, 0));
+        // A deadline already past: pixels not done are black.
+        r.recycle(f);
         let late = FrameOptions { deadline: Some(std::time::Instant::now()), stand_in: false };
         let f = render_frame_with(&r, &tracer, 5, &late);
         assert!(f.jobs.unfinished > 0, "the deadline left nothing");
         for (i, p) in f.image.pixels.iter().enumerate() {
             assert!(f.is_done(i) || *p == [0.0; 3], "pixel {i} not done but {p:?}");
+        }
+        // A deadline within the frame: what it finished is the frame's, the rest black.
+        let soon = FrameOptions {
+            deadline: Some(std::time::Instant::now() + std::time::Duration::from_micros(300)),
+            stand_in: false,
+        };
+        let f = render_frame_with(&r, &tracer, 5, &soon);
+        for (i, p) in f.image.pixels.iter().enumerate() {
+            let want = if f.is_done(i) { fresh.image.pixels[i] } else { [0.0; 3] };
+            assert_eq!(p.map(f32::to_bits), want.map(f32::to_bits), "pixel {i}");
         }
     }
 }
