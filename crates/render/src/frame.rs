@@ -508,7 +508,9 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
     let mut approx: Vec<u32> = Vec::new();
     // Jobs in the order of rows' groups (`rows`): tiles, and against a deadline interleaved
     // passes, so that what the deadline leaves is scattered.
+    let in_core = tracer.pager().is_none();
     let groups = match opts.deadline {
+        Some(_) if in_core && !aovs => rows::first_pass_then_bands(w, h, BAND_ROWS, backward),
         Some(_) => rows::interleaved_groups(w, h, backward),
         None => rows::tile_groups(w, h, backward),
     };
@@ -534,13 +536,24 @@ pub fn render_frame_with(r: &Renderer, tracer: &Tracer, frame: u32, opts: &Frame
             f.normal[p] = s.normal.to_array();
             f.albedo[p] = s.albedo.to_array();
         }
-    } else if tracer.pager().is_none() {
+    } else if in_core {
         // Nothing can suspend (an unpaged tracer, against a deadline): no job bookkeeping.
+        // The groups go over some pixels twice (`first_pass_then_bands`).
         let image = megaray_base::pixels_as_atomic(&mut f.image.pixels);
-        let (done, rays, apx) = groups_until(r, tracer, frame, &groups, opts.deadline, image);
-        let pixels: u64 = groups[..done].iter().map(|g| g.len as u64).sum();
+        let (done, [rays, again], apx) = groups_until(r, tracer, frame, &groups, opts.deadline, image);
+        // A whole frame's rays are its pixels' once (a partial one's count the first pass's
+        // pixels traced again too).
+        let rays = if done == groups.len() { rays } else { rays + again };
+        let mut pixels = n as u64;
         if done < groups.len() {
-            finished.extend(groups[..done].iter().flat_map(|g| (0..g.len as usize).map(|k| g.index(k, w) as u32)));
+            let mut seen = vec![false; n];
+            for g in &groups[..done] {
+                for k in 0..g.len as usize {
+                    seen[g.index(k, w)] = true;
+                }
+            }
+            finished.extend(seen.iter().enumerate().filter(|(_, &s)| s).map(|(p, _)| p as u32));
+            pixels = finished.len() as u64;
         }
         approx = apx;
         f.rays = rays;
@@ -622,7 +635,8 @@ fn put_group(image: &[[AtomicU32; 3]], g: rows::Group, w: u32, out: &rows::Group
 /// The groups of frame `frame` on every thread of the pool, from a shared counter a chunk at
 /// a time until `deadline`, each written into `image` (`put_group`) as it finishes, when
 /// nothing can suspend (an unpaged tracer). Every chunk handed out is finished whole, so the
-/// groups done are a prefix: returns its length, the rays fired and the pixels a stand-in
+/// groups done are a prefix: returns its length, the rays fired (by groups of neighbours,
+/// and by groups of pixels apart: `rows::first_pass_then_bands`) and the pixels a stand-in
 /// answered.
 fn groups_until(
     r: &Renderer,
@@ -631,12 +645,12 @@ fn groups_until(
     groups: &[rows::Group],
     deadline: Option<Instant>,
     image: &[[AtomicU32; 3]],
-) -> (usize, u64, Vec<u32>) {
+) -> (usize, [u64; 2], Vec<u32>) {
     const CHUNK: usize = 8;
     let w = r.settings.camera.width;
     let next = std::sync::atomic::AtomicUsize::new(0);
     let per_thread = rayon::broadcast(|_| {
-        let (mut caster, mut rays, mut approx) = (tracer, 0u64, Vec::new());
+        let (mut caster, mut rays, mut approx) = (tracer, [0u64; 2], Vec::new());
         while deadline.is_none_or(|d| Instant::now() < d) {
             let start = next.fetch_add(CHUNK, Ordering::Relaxed);
             if start >= groups.len() {
@@ -645,14 +659,14 @@ fn groups_until(
             for &g in &groups[start..(start + CHUNK).min(groups.len())] {
                 let out = r.group(g, frame, &mut caster).expect("a plain in-core Tracer never suspends");
                 put_group(image, g, w, &out);
-                rays += out.rays as u64;
+                rays[(g.step != 1) as usize] += out.rays as u64;
                 approx.extend((0..g.len as usize).filter(|k| out.approx & (1 << k) != 0).map(|k| g.index(k, w) as u32));
             }
         }
         (rays, approx)
     });
     let done = next.load(Ordering::Relaxed).min(groups.len());
-    let rays = per_thread.iter().map(|(r, _)| r).sum();
+    let rays = per_thread.iter().fold([0; 2], |a, (r, _)| [a[0] + r[0], a[1] + r[1]]);
     (done, rays, per_thread.into_iter().flat_map(|(_, a)| a).collect())
 }
 
