@@ -571,16 +571,20 @@ impl Shared {
     /// Makes room for tile `t` (evicting), reads and checks it, and publishes it.
     fn load(&self, t: u32) {
         let cost = self.cost[t as usize];
-        let Some(victims) = self.make_room(t, cost) else {
-            // Loaded meanwhile, or its pages are being released by another fetcher: the
-            // fetch loop's checks again, after a pause for the latter.
-            if self.state[t as usize].load(SeqCst) & EVICTING != 0 {
+        let victims = match self.make_room(t, cost) {
+            Ok(v) => v,
+            // Loaded meanwhile (or found damaged): the request is answered.
+            Err(seen) if seen & (AVAIL | CORRUPT) != 0 => {
+                self.state[t as usize].fetch_and(!REQ, SeqCst);
+                return;
+            }
+            // Its pages being released by another fetcher: asked again after a pause (decided
+            // by the state seen under the lock: the other may finish meanwhile).
+            Err(_) => {
                 lock(&self.queue).push(t);
                 std::thread::sleep(Duration::from_micros(200));
-            } else {
-                self.state[t as usize].fetch_and(!REQ, SeqCst);
+                return;
             }
-            return;
         };
         if !victims.is_empty() {
             self.synchronize();
@@ -643,12 +647,14 @@ impl Shared {
     /// Reserves `cost` bytes for a tile about to load, choosing victims by the clock until
     /// the reservation fits (evicting down to the low watermark once over the budget).
     /// Victims are no longer available when this returns; their pages are still mapped.
-    /// `None` if tile `t` is available or still being released (checked under the clock
-    /// lock, under which EVICTING is set: exact).
-    fn make_room(&self, t: u32, cost: u64) -> Option<Vec<u32>> {
+    /// Tile `t`'s state instead, as seen under the clock lock, if it is available, damaged or
+    /// still being released: a tile is made evicting only under that lock, so one seen
+    /// neither available nor evicting there is not being released while it loads.
+    fn make_room(&self, t: u32, cost: u64) -> Result<Vec<u32>, u32> {
         let mut c = lock(&self.clock);
-        if self.state[t as usize].load(SeqCst) & (AVAIL | EVICTING | CORRUPT) != 0 {
-            return None;
+        let seen = self.state[t as usize].load(SeqCst);
+        if seen & (AVAIL | EVICTING | CORRUPT) != 0 {
+            return Err(seen);
         }
         let mut victims = Vec::new();
         let low = (self.tile_budget - self.tile_budget / 16).saturating_sub(cost);
@@ -700,7 +706,7 @@ impl Shared {
         }
         c.bytes += cost;
         self.peak.fetch_max(c.bytes, Relaxed);
-        Some(victims)
+        Ok(victims)
     }
 
     /// Drops tile `t`'s pages from this process.

@@ -237,6 +237,7 @@ impl Accumulator {
     /// [`Accumulator::end_frame`]. The sums equal, bit for bit, [`Accumulator::add_frame`]
     /// of the frame the pieces make, with no frame put together.
     pub fn begin_frame(&mut self, aovs: bool) {
+        self.clear = false;
         self.first_aovs = aovs && (self.frames == 0 || self.depth.is_empty());
         if self.first_aovs {
             let n = (self.width * self.height) as usize;

@@ -254,7 +254,12 @@ impl<'s> Tracer<'s> {
                 Traced::Pending(p) => {
                     let mut seen = seen;
                     while !pager.settled(p.tile()) {
-                        seen = pager.wait_arrival(seen, std::time::Duration::from_millis(20));
+                        let now = pager.wait_arrival(seen, std::time::Duration::from_millis(20));
+                        if now == seen {
+                            // Nothing arrived: ask again (the tile may have come and gone).
+                            pager.request(p.tile());
+                        }
+                        seen = now;
                     }
                     from = Some(p);
                 }
