@@ -214,4 +214,37 @@ mod tests {
             }
         }
     }
+
+    /// The first pass, then every pixel: the first pass's pixels (one of every 4x4 block,
+    /// `PASSES[0]`) come first and twice, every other pixel once, after them.
+    #[test]
+    fn the_first_pass_then_every_pixel_band_by_band() {
+        let (dx, dy) = crate::frame::PASSES[0];
+        for (w, h) in [(1, 1), (7, 3), (33, 65), (64, 32), (100, 37)] {
+            for backward in [false, true] {
+                let groups = first_pass_then_bands(w, h, 8, backward);
+                let first = groups.iter().take_while(|g| g.step == 4).count();
+                let mut seen = vec![0u32; (w * h) as usize];
+                for (i, g) in groups.iter().enumerate() {
+                    assert!((1..=GROUP as u32).contains(&g.len));
+                    assert_eq!(g.step, if i < first { 4 } else { 1 }, "{w}x{h}: group {i}");
+                    for k in 0..g.len as usize {
+                        let p = g.index(k, w);
+                        let (x, y) = (p as u32 % w, p as u32 / w);
+                        assert!(i >= first || (x % 4, y % 4) == (dx, dy), "{w}x{h}: ({x}, {y}) in the first pass");
+                        seen[p] += 1;
+                    }
+                }
+                for (p, &c) in seen.iter().enumerate() {
+                    let (x, y) = (p as u32 % w, p as u32 / w);
+                    let want = if (x % 4, y % 4) == (dx, dy) { 2 } else { 1 };
+                    assert_eq!(c, want, "{w}x{h}: pixel ({x}, {y})");
+                }
+                // Band by band: after the first pass, rows never go back to an earlier band
+                // (forward) or a later one (backward).
+                let bands: Vec<u32> = groups[first..].iter().map(|g| g.y / 8).collect();
+                assert!(bands.windows(2).all(|b| if backward { b[0] >= b[1] } else { b[0] <= b[1] }), "{w}x{h}");
+            }
+        }
+    }
 }
