@@ -73,7 +73,7 @@ impl InstTree {
     /// needs).
     fn rebuild_lbvh(&mut self, boxes: &[Aabb], scratch: &mut Scratch) {
         use rayon::prelude::*;
-        let Scratch { keys, tmp, .. } = scratch;
+        let Scratch { keys, tmp, in_order, .. } = scratch;
         // The codes quantize the centres over a box: the last build's box, where there was
         // one (a frame's moves shift it little; a centre outside it is clamped to its edge,
         // which costs the tree some quality, never a hit), else the centres' own.
@@ -112,7 +112,11 @@ impl InstTree {
             return;
         }
         self.nodes.resize(2 * keys.len() - 1, InstNode { bounds: Aabb::EMPTY, count: 0, index: 0 });
-        build_lbvh(boxes, keys, 0, &mut self.nodes, 0);
+        // The boxes gathered in the tree's order on all threads (many loads in flight at
+        // once), so that the build reads them in order: its leaves' loads were a third of
+        // its time (docs/PERF.md, "Instances").
+        keys.par_iter().with_min_len(1 << 14).map(|&k| boxes[k as u32 as usize]).collect_into_vec(in_order);
+        build_lbvh(in_order, keys, 0, &mut self.nodes, 0);
         self.order.extend(keys.iter().map(|&k| k as u32));
     }
 
@@ -216,6 +220,8 @@ pub(crate) struct Scratch {
     sorted: Vec<Ref>,
     keys: Vec<u64>,
     tmp: Vec<u64>,
+    /// The boxes in the keys' order.
+    in_order: Vec<Aabb>,
 }
 
 /// The low 10 bits of `v` spread to every third bit (a Morton code's one axis).
@@ -284,12 +290,12 @@ fn radix_sort_high(keys: &mut Vec<u64>, tmp: &mut Vec<u64>) {
 }
 
 /// The linear BVH over `keys` (Morton code high, box index low, sorted; the first being
-/// `at_order` of the tree's order) into `nodes[0]` and the slots after it (laid out as
-/// [`build_into`] does); returns its box.
+/// `at_order` of the tree's order) and their `boxes` (in the same order) into `nodes[0]` and
+/// the slots after it (laid out as [`build_into`] does); returns its box.
 fn build_lbvh(boxes: &[Aabb], keys: &[u64], at_order: u32, nodes: &mut [InstNode], at: u32) -> Aabb {
     let n = keys.len();
     if n <= LEAF {
-        let bounds = keys.iter().fold(Aabb::EMPTY, |b, &k| b.union(&boxes[k as u32 as usize]));
+        let bounds = boxes.iter().fold(Aabb::EMPTY, |b, x| b.union(x));
         nodes[0] = InstNode { bounds, count: n as u32, index: at_order };
         return bounds;
     }
@@ -305,8 +311,9 @@ fn build_lbvh(boxes: &[Aabb], keys: &[u64], at_order: u32, nodes: &mut [InstNode
     let (_, rest) = nodes.split_at_mut(1);
     let (ln, rn) = rest.split_at_mut(left_slots);
     let (lk, rk) = keys.split_at(mid);
-    let mut left = move || build_lbvh(boxes, lk, at_order, ln, at + 1);
-    let mut right = move || build_lbvh(boxes, rk, at_order + mid as u32, rn, at + 1 + left_slots as u32);
+    let (lb, rb) = boxes.split_at(mid);
+    let mut left = move || build_lbvh(lb, lk, at_order, ln, at + 1);
+    let mut right = move || build_lbvh(rb, rk, at_order + mid as u32, rn, at + 1 + left_slots as u32);
     let (a, b) = if n > PARALLEL { rayon::join(left, right) } else { (left(), right()) };
     let bounds = a.union(&b);
     nodes[0] = InstNode { bounds, count: 0, index: at + 1 + left_slots as u32 };
