@@ -150,7 +150,9 @@ type Cell = u64;
 
 /// The cell of `p`, counted from `lo` in cells of size `1 / inv`, 21 bits an axis.
 fn cell_of(p: [f32; 3], lo: [f32; 3], inv: f32) -> Cell {
-    let q = |a: usize| (((p[a] - lo[a]) * inv).floor().max(0.0) as u64).min((1 << 21) - 1);
+    // `as` truncates toward zero and takes negatives and NaN to 0: the floor of what is not
+    // below 0, with no call to libm's `floorf` (the baseline build has no rounding instruction).
+    let q = |a: usize| (((p[a] - lo[a]) * inv) as u64).min((1 << 21) - 1);
     q(0) | (q(1) << 21) | (q(2) << 42)
 }
 

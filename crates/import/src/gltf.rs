@@ -66,7 +66,7 @@ pub(crate) struct PrimData {
     pub(crate) positions: Vec<[f32; 3]>,
     pub(crate) normals: Option<Vec<[f32; 3]>>,
     pub(crate) uvs: Option<Vec<[f32; 2]>>,
-    colors: Option<Vec<[f32; 4]>>,
+    pub(crate) colors: Option<Vec<[f32; 4]>>,
     pub(crate) indices: Option<Vec<u32>>,
 }
 

@@ -62,7 +62,7 @@ pub fn read_scene(path: &Path) -> Result<PbrtScene, ImportError> {
                     indices.push(i);
                 }
             }
-            let kind = ShapeKind::Mesh { p: d.positions, indices, n: d.normals, uv: d.uvs };
+            let kind = ShapeKind::Mesh { p: d.positions, indices, n: d.normals, uv: d.uvs, color: d.colors };
             let material = p.material().index().map(|i| i as u32);
             o.shapes.push(ShapeDesc {
                 kind,

@@ -249,3 +249,42 @@ fn mutated_gltf_never_panics() {
         std::fs::write(dir.path().join("scene.bin"), &bin).unwrap();
     }
 }
+
+/// A mesh with vertex colours used by two nodes: read with its structure kept, it is one
+/// object whose triangles carry the colours, as the flattening reader gives them.
+#[test]
+fn structured_gltf_keeps_vertex_colours() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut bin = Vec::new();
+    f32s(&mut bin, &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]); // 0..36
+    let colours = [1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.5, 0.0, 0.0, 1.0, 0.25];
+    f32s(&mut bin, &colours); // 36..84
+    std::fs::write(dir.path().join("c.bin"), &bin).unwrap();
+    let json = r#"{
+  "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0, 1]}],
+  "nodes": [{"mesh": 0}, {"mesh": 0, "translation": [5, 0, 0]}],
+  "meshes": [{"name": "tri", "primitives": [{"attributes": {"POSITION": 0, "COLOR_0": 1}}]}],
+  "buffers": [{"uri": "c.bin", "byteLength": 84}],
+  "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}, {"buffer": 0, "byteOffset": 36, "byteLength": 48}],
+  "accessors": [
+    {"bufferView": 0, "count": 3, "type": "VEC3", "componentType": 5126, "min": [0, 0, 0], "max": [1, 1, 0]},
+    {"bufferView": 1, "count": 3, "type": "VEC4", "componentType": 5126}
+  ]
+}"#;
+    let path = dir.path().join("c.gltf");
+    std::fs::write(&path, json).unwrap();
+    let want = [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 0.5], [0.0, 0.0, 1.0, 0.25]];
+
+    let mut flat = Collect::default();
+    import_file(&path, &ImportOptions::default(), &mut flat, &Notes::default()).unwrap();
+    assert_eq!(flat.tris.len(), 2, "flattened: the mesh once per node");
+    assert!(flat.tris.iter().all(|t| t.1.color == Some(want)));
+
+    let s = megaray_import::gltf_scene::read_scene(&path).unwrap();
+    let meshes: Vec<_> = s.objects.iter().filter(|o| !o.shapes.is_empty()).collect();
+    assert_eq!(meshes.len(), 1, "one object for the mesh, placed twice");
+    let mut c = Collect::default();
+    megaray_import::pbrt::feed_object(meshes[0], &ImportOptions::default(), &mut c, &Notes::default()).unwrap();
+    assert_eq!(c.tris.len(), 1);
+    assert_eq!(c.tris[0].1.color, Some(want), "the structured reader keeps COLOR_0");
+}

@@ -52,9 +52,16 @@ pub struct ShapeDesc {
 #[derive(Clone, Debug)]
 pub enum ShapeKind {
     /// `trianglemesh` (and `bilinearmesh`, as two triangles a quad): positions, three
-    /// indices a triangle, vertex normals and texture coordinates where given.
+    /// indices a triangle, vertex normals, texture coordinates and colours (RGBA: glTF's
+    /// `COLOR_0`; pbrt has none) where given.
     #[allow(missing_docs)]
-    Mesh { p: Vec<[f32; 3]>, indices: Vec<u32>, n: Option<Vec<[f32; 3]>>, uv: Option<Vec<[f32; 2]>> },
+    Mesh {
+        p: Vec<[f32; 3]>,
+        indices: Vec<u32>,
+        n: Option<Vec<[f32; 3]>>,
+        uv: Option<Vec<[f32; 2]>>,
+        color: Option<Vec<[f32; 4]>>,
+    },
     /// `plymesh`: a PLY file (binary, ASCII, or either gzip-compressed).
     Ply(PathBuf),
 }

@@ -44,7 +44,7 @@ pub(crate) fn shape(kind: &str, p: &Params, file: &Path, loc: &Loc) -> Result<Op
             let uv = p.nums("uv").map(|v| v.chunks_exact(2).map(|c| [c[0], c[1]]).collect::<Vec<_>>());
             let n = n.filter(|n| n.len() == pts.len());
             let uv = uv.filter(|uv| uv.len() == pts.len());
-            Ok(Some(ShapeKind::Mesh { p: pts, indices, n, uv }))
+            Ok(Some(ShapeKind::Mesh { p: pts, indices, n, uv, color: None }))
         }
         "plymesh" => {
             let f = p.string("filename").ok_or_else(|| loc.err("plymesh without \"string filename\""))?;
@@ -79,13 +79,13 @@ pub fn feed_object(
         let mut moved =
             Moved { sink: &mut *sink, xform: s.xform, normal, flip, material: s.material, orient: s.emitting };
         match &s.kind {
-            ShapeKind::Mesh { p, indices, n, uv } => {
+            ShapeKind::Mesh { p, indices, n, uv, color } => {
                 for t in indices.chunks_exact(3) {
                     let c = [t[0] as usize, t[1] as usize, t[2] as usize];
                     let attr = TriAttr {
                         normal: n.as_ref().map(|n| c.map(|i| n[i])),
                         uv: uv.as_ref().map(|uv| c.map(|i| uv[i])),
-                        color: None,
+                        color: color.as_ref().map(|a| c.map(|i| a[i])),
                         material: NO_MATERIAL,
                     };
                     moved.triangle(c.map(|i| p[i]), &attr)?;
