@@ -400,14 +400,16 @@ pub struct RenderArgs {
     mpi_timeout: f64,
     /// A camera path instead of a still: N frames orbiting the point looked at (DEG degrees
     /// in all, default 360), each rendered on its own; prints frame times and bytes read
-    /// (one JSON line per frame with --json); the image is the last frame.
+    /// (one JSON line per frame with --json); the image is the last frame, or every frame
+    /// with `-o name_####.png` (the last run of # becomes the frame number, zero-padded).
     #[arg(long, value_name = "N[:DEG]")]
     orbit: Option<String>,
     /// Rigid motion of a scene's instances: N frames, the instances named NAME (default: the
-    /// top-level ones) spinning about their centres or orbiting their group's centre; only
-    /// the instance trees are rebuilt each frame (their time in --json); the image is the last
-    /// frame.
-    #[arg(long, value_name = "N[:spin|:orbit][:NAME]")]
+    /// top-level ones) spinning about their centres, orbiting their group's centre, or moved
+    /// along a path of displacements (path=0,0,0/10,0,0/10,0,10: the first frame at the first
+    /// point, the last at the last); only the instance trees are rebuilt each frame (their time
+    /// in --json); the image is the last frame, or every frame with `-o name_####.png`.
+    #[arg(long, value_name = "N[:spin|:orbit|:path=X,Y,Z/X,Y,Z...][:NAME]")]
     animate: Option<String>,
 }
 
@@ -666,9 +668,20 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         }
     }
     .with_lod_error(a.lod_error.unwrap_or(if area.is_some() { 0.0 } else { 1.0 }));
+    // `-o name_####.png`: each frame of an animation or orbit to its own file.
+    let numbered = animate.is_some() || a.orbit.is_some();
+    let mut each =
+        |f: u32, img: &megaray_render::Image| match numbered.then(|| crate::animate::frame_path(&a.out, f)).flatten() {
+            Some(p) => save(img, &p, exr, a.exposure, curve),
+            None => Ok(()),
+        };
+    let last = |img: &megaray_render::Image| match numbered && crate::animate::frame_path(&a.out, 0).is_some() {
+        true => Ok(()),
+        false => save(img, &a.out, exr, a.exposure, curve),
+    };
     if let Some(an) = &animate {
-        let img = crate::animate::run(an, &scene, &renderer, &mut tracer, &pool, a.json)?;
-        return save(&img, &a.out, exr, a.exposure, curve);
+        let img = crate::animate::run(an, &scene, &renderer, &mut tracer, &pool, a.json, &mut each)?;
+        return last(&img);
     }
     if let Some(spec) = &a.orbit {
         let o = crate::paging::parse_orbit(spec)?;
@@ -678,11 +691,11 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             let d = eye - at;
             Camera::look_at(at + Vec3::new(c * d.x + s * d.z, d.y, -s * d.x + c * d.z), at, up, fov, w, h)
         };
-        let img = crate::paging::orbit(o, renderer, camera, &tracer, &pool, a.json)?;
+        let img = crate::paging::orbit(o, renderer, camera, &tracer, &pool, a.json, &mut each)?;
         if let Some(e) = scene.first_error().or_else(|| pager.as_ref().and_then(|p| p.first_error())) {
             return Err(e.into());
         }
-        return save(&img, &a.out, exr, a.exposure, curve);
+        return last(&img);
     }
     // Under mpirun: the other ranks render what rank 0 hands out, and are done.
     let mut cluster = crate::cluster::session(&scene, pool.current_num_threads(), a.mpi_timeout)?;

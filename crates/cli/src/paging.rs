@@ -169,7 +169,7 @@ pub fn parse_orbit(spec: &str) -> Result<(u32, f32)> {
 /// `render --orbit N[:DEG]`: N frames, frame k seen by `camera(angle_k)` (the eye turned
 /// about the vertical axis through the point looked at), each rendered on its own (no
 /// accumulation). Prints per-frame times and bytes read, and a summary. Returns the last
-/// frame's image.
+/// frame's image; each frame goes to `on_frame` (its index, the image) as it is made.
 pub fn orbit(
     (n, deg): (u32, f32),
     mut r: Renderer,
@@ -177,6 +177,7 @@ pub fn orbit(
     tracer: &Tracer,
     pool: &rayon::ThreadPool,
     json: bool,
+    on_frame: &mut dyn FnMut(u32, &megaray_render::Image) -> Result<()>,
 ) -> Result<megaray_render::Image> {
     let mut times = Vec::with_capacity(n as usize);
     let mut bytes = Vec::with_capacity(n as usize);
@@ -216,6 +217,7 @@ pub fn orbit(
                 })
             );
         }
+        on_frame(k, &f.image)?;
         last = Some(f.image);
     }
     let total = start.elapsed().as_secs_f64();

@@ -53,6 +53,29 @@ fn a_pbrt_scene_builds_renders_from_its_camera_and_animates() {
     assert!(lines[..4].iter().all(|l| l["top_rebuild_ms"].as_f64().is_some() && l["moved_instances"] == 3));
     let (code, _, err) = run(&["render", &d("s.mray"), "-o", &d("a.png"), "--animate", "2:spin:ghost"]);
     assert!(code != 0 && err.contains("no instance named `ghost`"), "{err}");
+    // Moved along a path, every frame to its own file: the first frame (the path's first point
+    // is where the instances rest) is the still; the last is not.
+    let (code, _, err) = run(&[
+        "render",
+        &d("s.mray"),
+        "-o",
+        &d("f_##.png"),
+        "--res",
+        "64x48",
+        "--shader",
+        "normal",
+        "--animate",
+        "3:path=0,0,0/0,-1,0/2,-1,0",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let frame = |k: u32| std::fs::read(d(&format!("f_{k:02}.png"))).unwrap();
+    assert_eq!(frame(0), std::fs::read(d("s.png")).unwrap(), "frame 0 at rest is the still");
+    assert_ne!(frame(2), frame(0), "the last frame has the instances moved");
+    assert!(!dir.path().join("f_##.png").exists(), "no file under the pattern's own name");
+    // A camera orbit numbers its frames the same way.
+    let (code, _, err) = run(&["render", &d("s.mray"), "-o", &d("o#.png"), "--res", "32x24", "--orbit", "2"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(dir.path().join("o0.png").exists() && dir.path().join("o1.png").exists());
     // The viewer starts at the scene's camera too.
     std::fs::write(d("script.txt"), "frames 1\n").unwrap();
     let (code, _, err) = run(&["view", &d("s.mray"), "--script", &d("script.txt"), "--out", &d("v"), "--res", "32x24"]);
