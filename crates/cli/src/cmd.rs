@@ -470,6 +470,16 @@ fn is_exr(path: &Path) -> Result<bool> {
     }
 }
 
+/// Fails at once when `out` cannot be written, not after the render: a temporary file made
+/// and removed in its folder, where the image's own goes before it is renamed into place.
+fn check_writable(out: &Path) -> Result<()> {
+    let dir = out.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    match tempfile::Builder::new().prefix(".megaray-check").tempfile_in(dir) {
+        Ok(_) => Ok(()),
+        Err(e) => bail!("{}: cannot write there: {e}", out.display()),
+    }
+}
+
 /// Writes a still (no AOVs): EXR linear, PNG tone-mapped.
 fn save(img: &megaray_render::Image, out: &Path, exr: bool, exposure: f32, curve: ToneCurve) -> Result<()> {
     if exr {
@@ -507,6 +517,10 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
         other => bail!("--tonemap: unknown curve `{other}` (known: clamp, reinhard)"),
     };
     let exr = is_exr(&a.out)?;
+    // Only rank 0 of an MPI job writes the image (the others may see another file system).
+    if crate::cluster::launched_rank().is_none_or(|r| r == 0) {
+        check_writable(&a.out)?;
+    }
     let (mut aov_depth, mut aov_normal, mut aov_albedo) = (false, false, false);
     for name in a.aov.as_deref().unwrap_or("").split(',').map(str::trim).filter(|n| !n.is_empty()) {
         match name {

@@ -73,7 +73,11 @@ fn bad_arguments_and_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let scene = small_scene(dir.path());
     let s = scene.to_str().unwrap();
-    fails(&["render", s, "-o", "/nonexistent-dir/x.png", "--res", "16x16"], &["x.png", "cannot write"]);
+    // Refused before the render (a million frames would take long), not after it.
+    fails(
+        &["render", s, "-o", "/nonexistent-dir/x.png", "--res", "16x16", "--frames", "1000000"],
+        &["x.png", "cannot write there"],
+    );
     fails(&["build", &model("spot.obj").to_string_lossy(), "-o", "/nonexistent-dir/x.mray"], &["nonexistent-dir"]);
     fails(&["build", "nothere.ply", "-o", dir.path().join("y.mray").to_str().unwrap()], &["nothere.ply"]);
     fails(&["gen", "plant:abc", "-o", dir.path().join("z.ply").to_str().unwrap()], &["plant:abc"]);
