@@ -49,3 +49,25 @@ pub fn import(name: &str, data: &[u8]) {
     let opts = megaray_import::ImportOptions { mem_limit: 1 << 20, temp_dir: dir().clone() };
     let _ = megaray_import::import_file(&path, &opts, &mut Check(0), &NoProgress);
 }
+
+/// `data` split at the first `marker` (a line of its own): what comes before it, and after it
+/// (empty when there is no marker).
+pub fn split<'a>(data: &'a [u8], marker: &[u8]) -> (&'a [u8], &'a [u8]) {
+    match data.windows(marker.len()).position(|w| w == marker) {
+        Some(i) => (&data[..i], &data[i + marker.len()..]),
+        None => (data, &[]),
+    }
+}
+
+/// Reads `data` as a pbrt-v4 scene named `name`, then every object's shapes (PLY files they
+/// name included), with a small memory limit as [`import`] has.
+pub fn pbrt(name: &str, data: &[u8]) {
+    let path = file(name, data);
+    let Ok(scene) = megaray_import::pbrt::read_scene(&path) else { return };
+    let opts = megaray_import::ImportOptions { mem_limit: 1 << 20, temp_dir: dir().clone() };
+    for o in &scene.objects {
+        if megaray_import::pbrt::feed_object(o, &opts, &mut Check(0), &NoProgress).is_err() {
+            return;
+        }
+    }
+}

@@ -3,7 +3,7 @@
 # once, default 1) and exits non-zero if any found a crash (a panic, abort or signal), a hang
 # (over 10 s) or an allocation over 2 GiB (the fuzzer's memory limit makes it a crash).
 # Needs cargo-afl (`cargo install cargo-afl`, then `cargo afl config --build`).
-# Usage: fuzz/run.sh SECONDS [TARGET...]     (targets: ply obj stl gltf env scene)
+# Usage: fuzz/run.sh SECONDS [TARGET...]     (targets: ply obj stl gltf env scene pbrt)
 # Findings land in fuzz/out/<target>/default/{crashes,hangs}; a summary per target is printed
 # (executions, rate, coverage as the fuzzer's bitmap share and edges found).
 set -eu
@@ -11,7 +11,7 @@ secs=${1:?usage: fuzz/run.sh SECONDS [TARGET...]}
 shift
 here=$(cd "$(dirname "$0")" && pwd)
 cd "$here"
-targets=${*:-ply obj stl gltf env scene}
+targets=${*:-ply obj stl gltf env scene pbrt}
 cargo afl build --release
 if [ ! -d seeds ]; then
     (cd .. && cargo build --release -p megaray)

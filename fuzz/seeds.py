@@ -114,6 +114,57 @@ def hdr(w, h, rle):
 put("env", "flat.hdr", hdr(4, 2, False))
 put("env", "rle.hdr", hdr(16, 2, True))
 
+# pbrt-v4 scenes (+ an included file after '#INC', a PLY after '#PLY'): every statement read.
+pbrt = """LookAt 0 3 12  0 0 0  0 1 0
+Camera "perspective" "float fov" [ 40 ]
+Film "rgb" "integer xresolution" [ 64 ] "integer yresolution" [ 48 ] "string filename" "x.exr"
+Sampler "zsobol" "integer pixelsamples" 16
+CoordinateSystem "cam"
+WorldBegin
+LightSource "distant" "point3 from" [ 1 2 1 ] "point3 to" [ 0 0 0 ] "blackbody L" [ 5500 ]
+LightSource "infinite" "string filename" "sky.exr"
+Texture "wood" "spectrum" "imagemap" "string filename" "wood.png"
+MakeNamedMaterial "gold" "string type" "conductor" "spectrum eta" "metal-Au-eta" "float roughness" 0.1
+Material "diffuse" "texture reflectance" "wood"
+Include "inc.pbrt"
+ObjectBegin "quad"
+  Shape "bilinearmesh" "point3 P" [ -1 -1 0  1 -1 0  -1 1 0  1 1 0 ] "point2 uv" [ 0 0 1 0 0 1 1 1 ]
+ObjectEnd
+ObjectBegin "row"
+  Translate -3 0 0  ObjectInstance "quad"
+  Translate 3 0 0   ObjectInstance "quad"
+ObjectEnd
+AttributeBegin
+  Transform [ 1 0 0 0  0 1 0 0  0 0 1 0  0 2 0 1 ]
+  ConcatTransform [ 1 0 0 0  0 1 0 0  0 0 -1 0  0 0 0 1 ]
+  NamedMaterial "gold"
+  ObjectInstance "row"
+AttributeEnd
+AttributeBegin
+  Rotate 30 0 1 0  Scale 1 -2 1  ReverseOrientation
+  Material "coateddiffuse" "rgb reflectance" [ 0.2 0.3 0.4 ]
+  AreaLightSource "diffuse" "rgb L" [ 4 4 4 ]
+  Shape "trianglemesh" "point3 P" [ -6 -4 -1  6 -4 -1  0 -4 -8 ] "integer indices" [ 0 1 2 ]
+    "normal N" [ 0 1 0 0 1 0 0 1 0 ] "point2 uv" [ 0 0 1 0 0 1 ]
+AttributeEnd
+CoordSysTransform "cam"
+Material "dielectric" "float eta" 1.5
+Shape "plymesh" "string filename" "m.ply"
+Shape "sphere" "float radius" 2
+Shape "curve" "point3 P" [ 0 0 0 1 1 1 2 2 2 3 3 3 ]
+"""
+inc = """# included
+AttributeBegin
+  Translate 0 -1 0
+  Shape "trianglemesh" "point3 P" [ 0 0 0  1 0 0  0 1 0 ] "integer indices" [ 0 1 2 ]
+AttributeEnd
+"""
+put("pbrt", "features.pbrt", pbrt + "#INC\n" + inc + "#PLY\n" + ply("ascii").decode())
+put("pbrt", "binary-ply.pbrt", pbrt.encode() + b"#INC\n" + inc.encode() + b"#PLY\n" + ply("binary_little_endian"))
+stairs = head(os.path.join("pbrt-staircase", "staircase.pbrt"), 16384)
+if stairs:
+    put("pbrt", "staircase-head.pbrt", stairs)
+
 with tempfile.TemporaryDirectory() as t:
     o = os.path.join(t, "s.obj")
     with open(o, "w") as f:

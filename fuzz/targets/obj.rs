@@ -2,11 +2,7 @@
 //! `m.mtl` it may name (`mtllib m.mtl`).
 fn main() {
     afl::fuzz!(|data: &[u8]| {
-        let split = data.windows(5).position(|w| w == b"#MTL\n");
-        let (obj, mtl) = match split {
-            Some(i) => (&data[..i], &data[i + 5..]),
-            None => (data, &[][..]),
-        };
+        let (obj, mtl) = megaray_fuzz::split(data, b"#MTL\n");
         megaray_fuzz::file("m.mtl", mtl);
         megaray_fuzz::import("input.obj", obj);
     });
