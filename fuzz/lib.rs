@@ -63,7 +63,21 @@ pub fn split<'a>(data: &'a [u8], marker: &[u8]) -> (&'a [u8], &'a [u8]) {
 /// name included), with a small memory limit as [`import`] has.
 pub fn pbrt(name: &str, data: &[u8]) {
     let path = file(name, data);
-    let Ok(scene) = megaray_import::pbrt::read_scene(&path) else { return };
+    if let Ok(scene) = megaray_import::pbrt::read_scene(&path) {
+        feed(&scene);
+    }
+}
+
+/// Reads the file `name` (written before) as a glTF scene with its structure kept, then every
+/// object's shapes.
+pub fn gltf_scene(name: &str) {
+    if let Ok(scene) = megaray_import::gltf_scene::read_scene(&dir().join(name)) {
+        feed(&scene);
+    }
+}
+
+/// Every object's shapes of a scene description, until one fails.
+fn feed(scene: &megaray_import::pbrt::PbrtScene) {
     let opts = megaray_import::ImportOptions { mem_limit: 1 << 20, temp_dir: dir().clone() };
     for o in &scene.objects {
         if megaray_import::pbrt::feed_object(o, &opts, &mut Check(0), &NoProgress).is_err() {

@@ -70,6 +70,7 @@ pub fn read_scene(path: &Path) -> Result<PbrtScene, ImportError> {
                 reverse: false,
                 material,
                 place: name.clone(),
+                declared: (path.to_path_buf(), format!("mesh \"{name}\" primitive {pi}")),
                 emitting: false,
             });
         }

@@ -227,3 +227,36 @@ fn malformed_scenes_give_one_line_with_file_line_and_column() {
     let e = read_scene(&b).unwrap_err().to_string();
     assert!(e.contains("cycle"), "{e}");
 }
+
+/// A transform that takes finite corners out of range: reading the shapes is one line of
+/// error at the shape's statement, never a non-finite triangle (found by fuzzing the glTF
+/// scene reader, which shares this path).
+#[test]
+fn a_transform_overflowing_the_corners_is_an_error_at_the_shape() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = "WorldBegin\nScale 1e30 1e30 1e30\n  Shape \"trianglemesh\" \"point3 P\" [0 0 0 1e30 0 0 0 1 0] \"integer indices\" [0 1 2]";
+    let p = write(dir.path(), "far.pbrt", text);
+    let s = read_scene(&p).unwrap();
+    struct Finite(usize);
+    impl megaray_import::TriangleSink for Finite {
+        fn triangle(
+            &mut self,
+            p: [[f32; 3]; 3],
+            _: &megaray_import::TriAttr,
+        ) -> Result<(), megaray_import::ImportError> {
+            assert!(p.iter().flatten().all(|x| x.is_finite()), "a non-finite corner passed on");
+            self.0 += 1;
+            Ok(())
+        }
+        fn material(&mut self, _: megaray_import::Material) -> u32 {
+            0
+        }
+    }
+    let opts = megaray_import::ImportOptions::default();
+    let e = s.objects.iter().try_for_each(|o| {
+        megaray_import::pbrt::feed_object(o, &opts, &mut Finite(0), &megaray_base::NoProgress).map(|_| ())
+    });
+    let e = e.expect_err("an infinite corner").to_string();
+    assert!(e.contains("far.pbrt") && e.contains("line 3:3") && e.contains("infinite"), "{e}");
+    assert!(!e.contains('\n'), "one line: {e}");
+}

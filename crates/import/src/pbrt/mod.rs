@@ -40,8 +40,11 @@ pub struct ShapeDesc {
     pub reverse: bool,
     /// Index into [`PbrtScene::materials`], or `None`.
     pub material: Option<u32>,
-    /// Where it was declared (for messages).
+    /// Where it was declared (for component names).
     pub place: String,
+    /// The file that declared it and where in it (for errors: [`ImportError`]'s path and
+    /// location).
+    pub declared: (PathBuf, String),
     /// An area light's shape: each triangle wound to face the side its vertex normals face,
     /// when it has them (pbrt's rule for which side emits), so that the winding's front is
     /// the emitting side.
@@ -350,6 +353,7 @@ impl Parser {
                         reverse: self.state.reverse,
                         material: self.state.material,
                         place,
+                        declared: (loc.file.clone(), format!("line {}:{}", loc.line, loc.col)),
                         emitting: false,
                     };
                     if let Some(area) = self.state.area {

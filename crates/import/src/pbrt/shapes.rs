@@ -1,7 +1,7 @@
 //! pbrt shapes as triangles: `trianglemesh`, `bilinearmesh` (two triangles a quad) and
 //! `plymesh` (through the PLY reader), moved by their transforms as an object is built.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use megaray_base::{Affine, Progress, Vec3};
 
@@ -76,8 +76,15 @@ pub fn feed_object(
         }
         let normal = s.xform.inverse().unwrap_or(Affine::IDENTITY);
         let flip = s.reverse != (s.xform.determinant() < 0.0);
-        let mut moved =
-            Moved { sink: &mut *sink, xform: s.xform, normal, flip, material: s.material, orient: s.emitting };
+        let mut moved = Moved {
+            sink: &mut *sink,
+            xform: s.xform,
+            normal,
+            flip,
+            material: s.material,
+            orient: s.emitting,
+            declared: &s.declared,
+        };
         match &s.kind {
             ShapeKind::Mesh { p, indices, n, uv, color } => {
                 for t in indices.chunks_exact(3) {
@@ -126,11 +133,23 @@ struct Moved<'a> {
     material: Option<u32>,
     /// Wind each triangle that has vertex normals to face the side they face.
     orient: bool,
+    /// The shape's file and place in it, for errors.
+    declared: &'a (PathBuf, String),
 }
 
 impl TriangleSink for Moved<'_> {
     fn triangle(&mut self, p: [[f32; 3]; 3], attr: &TriAttr) -> Result<(), ImportError> {
-        let mut p = p.map(|c| self.xform.point(Vec3::from(c)).into());
+        let mut p: [[f32; 3]; 3] = p.map(|c| self.xform.point(Vec3::from(c)).into());
+        // Readers pass finite corners; a transform can still take them out of range.
+        if let Some(bad) = p.iter().flatten().find(|c| !c.is_finite()) {
+            let what = if bad.is_nan() { "NaN" } else { "infinite" };
+            let (file, at) = self.declared;
+            return Err(ImportError::new(
+                file,
+                Some(at.clone()),
+                format!("a corner is {what} after the shape's transform"),
+            ));
+        }
         let mut a = attr.clone();
         a.normal = a.normal.map(|n| n.map(|n| self.normal.normal_by_inverse(Vec3::from(n)).normalize_or_zero().into()));
         if let Some(m) = self.material {
