@@ -37,6 +37,11 @@ pub use progress::{NoProgress, Progress};
 pub use ray::{intersect_triangle, t_start, Ray, Rays16, TriHit, WatertightRay};
 pub use size::{format_size, parse_size};
 
+/// Most levels of instancing a scene may nest (groups within groups, glTF nodes within nodes,
+/// pbrt objects placing objects): the tracer walks them recursively, under a kilobyte of a
+/// thread's stack a level, so deeper scenes are refused with one line where they are read.
+pub const MAX_NESTING: u32 = 256;
+
 /// Starts loading the cache line that holds `x` (a hint: it never faults and changes nothing
 /// the program can see; a no-op off x86-64). For passes that gather from big arrays in an
 /// order known ahead, so that their misses overlap instead of queueing.

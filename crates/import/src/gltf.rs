@@ -169,17 +169,24 @@ pub(crate) fn plan(doc: &::gltf::Document, base: &Path) -> Result<Plan, (Option<
     }
     let mut visited = vec![false; n];
     let mut instances = Vec::new();
-    let mut stack: Vec<(::gltf::Node, Mat4, String)> = Vec::new();
+    // (node, its parent's world transform, its parent's path, its depth: 1 for a root).
+    let mut stack: Vec<(::gltf::Node, Mat4, String, u32)> = Vec::new();
     for root in scene.nodes().collect::<Vec<_>>().into_iter().rev() {
         if parents[root.index()] > 0 {
             let msg = "a root node of the scene is also a child of another node";
             return Err((Some(format!("node {}", root.index())), msg.to_string()));
         }
-        stack.push((root, Mat4::IDENTITY, String::new()));
+        stack.push((root, Mat4::IDENTITY, String::new(), 1));
     }
-    while let Some((node, parent, above)) = stack.pop() {
+    while let Some((node, parent, above, depth)) = stack.pop() {
         if std::mem::replace(&mut visited[node.index()], true) {
             continue;
+        }
+        // Each node a level of instancing when the structure is kept (`gltf_scene`: the world,
+        // then a group a node, then its mesh's), whose readers recurse through them.
+        if depth + 1 > megaray_base::MAX_NESTING {
+            let msg = format!("the node hierarchy nests more than {} levels of instancing", megaray_base::MAX_NESTING);
+            return Err((Some(format!("node {}", node.index())), msg));
         }
         let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
         let name = node.name().map_or_else(|| format!("node {}", node.index()), str::to_string);
@@ -188,7 +195,7 @@ pub(crate) fn plan(doc: &::gltf::Document, base: &Path) -> Result<Plan, (Option<
             instances.push((world, mesh.index(), path.clone()));
         }
         for c in node.children().collect::<Vec<_>>().into_iter().rev() {
-            stack.push((c, world, path.clone()));
+            stack.push((c, world, path.clone(), depth + 1));
         }
     }
     let meshes = doc

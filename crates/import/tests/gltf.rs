@@ -288,3 +288,38 @@ fn structured_gltf_keeps_vertex_colours() {
     assert_eq!(c.tris.len(), 1);
     assert_eq!(c.tris[0].1.color, Some(want), "the structured reader keeps COLOR_0");
 }
+
+/// A node hierarchy nesting more levels of instancing than `MAX_NESTING` is one line of error,
+/// flattened or structured (a chain of 200,000 nodes overflowed the structured reader's stack);
+/// one level less reads.
+#[test]
+fn a_node_chain_too_deep_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let chain = |n: u32, name: &str| {
+        let mut bin = Vec::new();
+        f32s(&mut bin, &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        std::fs::write(dir.path().join("t.bin"), &bin).unwrap();
+        let nodes: Vec<String> = (0..n)
+            .map(|i| if i + 1 < n { format!(r#"{{"children": [{}]}}"#, i + 1) } else { r#"{"mesh": 0}"#.into() })
+            .collect();
+        let json = format!(
+            r#"{{"asset": {{"version": "2.0"}}, "scene": 0, "scenes": [{{"nodes": [0]}}], "nodes": [{}],
+  "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+  "buffers": [{{"uri": "t.bin", "byteLength": 36}}], "bufferViews": [{{"buffer": 0, "byteLength": 36}}],
+  "accessors": [{{"bufferView": 0, "count": 3, "type": "VEC3", "componentType": 5126, "min": [0, 0, 0], "max": [1, 1, 0]}}]}}"#,
+            nodes.join(",")
+        );
+        let p = dir.path().join(name);
+        std::fs::write(&p, json).unwrap();
+        p
+    };
+    // The world, a group a node, the mesh's: n + 1 levels.
+    let max = megaray_base::MAX_NESTING;
+    let ok = chain(max - 1, "ok.gltf");
+    assert_eq!(collect(&ok).unwrap().0.tris.len(), 1);
+    assert!(megaray_import::gltf_scene::read_scene(&ok).is_ok());
+    let deep = chain(200_000, "deep.gltf");
+    for e in [import_error(&deep), megaray_import::gltf_scene::read_scene(&deep).unwrap_err().to_string()] {
+        assert!(e.contains("deep.gltf") && e.contains("more than 256 levels") && !e.contains('\n'), "{e}");
+    }
+}

@@ -260,3 +260,25 @@ fn a_transform_overflowing_the_corners_is_an_error_at_the_shape() {
     assert!(e.contains("far.pbrt") && e.contains("line 3:3") && e.contains("infinite"), "{e}");
     assert!(!e.contains('\n'), "one line: {e}");
 }
+
+/// Objects placing objects nest up to `MAX_NESTING` levels; one more is one line of error at
+/// the `ObjectInstance` that goes too deep (the tracer recurses through the levels; a chain of
+/// 5,000 overflowed a render thread's stack).
+#[test]
+fn objects_nested_too_deep_are_an_error_at_the_instance() {
+    let dir = tempfile::tempdir().unwrap();
+    let chain = |n: u32| {
+        let mut t = String::from("WorldBegin\nObjectBegin \"o0\"\n Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0] \"integer indices\" [0 1 2]\nObjectEnd\n");
+        for i in 1..=n {
+            t += &format!("ObjectBegin \"o{i}\"\n ObjectInstance \"o{}\"\nObjectEnd\n", i - 1);
+        }
+        t + &format!("ObjectInstance \"o{n}\"\n")
+    };
+    // The world's group places o(n), down to o0's: n + 1 levels of groups.
+    let max = megaray_base::MAX_NESTING;
+    assert!(read_scene(&write(dir.path(), "ok.pbrt", &chain(max - 1))).is_ok());
+    let e = read_scene(&write(dir.path(), "deep.pbrt", &chain(5000))).unwrap_err().to_string();
+    assert!(e.contains("deep.pbrt") && e.contains("more than 256 levels"), "{e}");
+    // At o257, placing o256: line 4 + 3 * 256 + 2.
+    assert!(e.contains(&format!("line {}:2", 4 + 3 * 256 + 2)) && !e.contains('\n'), "{e}");
+}

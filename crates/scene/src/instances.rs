@@ -4,9 +4,9 @@
 //! An *object* is a run of full-detail parts with a tree of its own in the top-level node
 //! array; a *group* is a list of *instances*, each an object or a later group placed by a
 //! 3x4 affine transform, with an optional material. Group 0 is the scene. Groups name only
-//! later groups, so that the graph has no cycles and nests to any depth; a few objects placed
-//! a few times at each of several levels make scenes of trillions of triangles that take
-//! bytes per instance, not per triangle.
+//! later groups, so that the graph has no cycles, and nest up to `MAX_NESTING` levels (the
+//! tracer recurses through them); a few objects placed a few times at each of several levels
+//! make scenes of trillions of triangles that take bytes per instance, not per triangle.
 
 use bytemuck::{Pod, Zeroable};
 use megaray_base::{Aabb, Affine};
@@ -190,8 +190,9 @@ impl Instancing {
 
     /// What a reader checks (the section's meaning; its bytes were checksummed): objects
     /// cover full-detail parts in order and their trees lie in the top-level tree, groups'
-    /// instances exist, instances name existing objects, later groups only (no cycles) and
-    /// existing materials, with finite, invertible transforms. Returns what is wrong.
+    /// instances exist, instances name existing objects, later groups only (no cycles, at most
+    /// [`megaray_base::MAX_NESTING`] levels) and existing materials, with finite, invertible
+    /// transforms. Returns what is wrong.
     pub fn check(&self, full_parts: u32, top_nodes: u32, materials: u32) -> Result<(), String> {
         if self.groups.is_empty() {
             return Err("instances without a root group".into());
@@ -228,6 +229,20 @@ impl Instancing {
                         inst.target
                     ));
                 }
+            }
+        }
+        // Levels of groups below each (groups name later ones only: from the last), at most
+        // `MAX_NESTING`: the tracer recurses through them.
+        let mut levels = vec![0u32; self.groups.len()];
+        for g in (0..self.groups.len()).rev() {
+            let gr = &self.groups[g];
+            for inst in &self.instances[gr.first as usize..(gr.first + gr.count) as usize] {
+                if let Target::Group(h) = inst.target {
+                    levels[g] = levels[g].max(levels[h as usize] + 1);
+                }
+            }
+            if levels[g] > megaray_base::MAX_NESTING {
+                return Err(format!("group {g}: groups nest more than {} levels deep", megaray_base::MAX_NESTING));
             }
         }
         for (k, inst) in self.instances.iter().enumerate() {
@@ -360,5 +375,30 @@ mod tests {
         assert!(sample().check(3, 2, 1).is_err(), "parts left out of every object");
         assert!(sample().check(2, 1, 1).is_err(), "a tree beyond the top-level nodes");
         assert!(sample().check(2, 2, 0).is_err(), "a material that does not exist");
+    }
+
+    /// Groups nested `MAX_NESTING` levels below the scene are read; one more is refused (the
+    /// tracer recurses through them).
+    #[test]
+    fn nesting_deeper_than_the_limit_is_refused() {
+        let chain = |levels: u32| {
+            let mut s = sample();
+            // Group g places group g + 1, the last the tree.
+            let n = levels + 1;
+            s.groups = (0..n).map(|g| Group { name: format!("g{g}"), first: g, count: 1 }).collect();
+            s.instances = (0..n)
+                .map(|g| Instance {
+                    name: String::new(),
+                    xform: Affine::IDENTITY,
+                    target: if g + 1 < n { Target::Group(g + 1) } else { Target::Object(0) },
+                    material: None,
+                })
+                .collect();
+            s.objects.truncate(1);
+            s
+        };
+        assert!(chain(megaray_base::MAX_NESTING).check(1, 2, 1).is_ok());
+        let e = chain(megaray_base::MAX_NESTING + 1).check(1, 2, 1).unwrap_err();
+        assert!(e.contains("more than 256 levels"), "{e}");
     }
 }

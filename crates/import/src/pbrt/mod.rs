@@ -149,6 +149,9 @@ struct Parser {
     named_materials: HashMap<String, u32>,
     textures: HashMap<String, PathBuf>,
     objects: HashMap<String, u32>,
+    /// Each object's levels of instancing: 0 when it places nothing, else one more than the
+    /// deepest object it places (at most [`megaray_base::MAX_NESTING`]).
+    depth: Vec<u32>,
     /// The object being defined (`ObjectBegin`), else 0 (the world).
     current: u32,
     camera_ctm: Option<(Affine, f32)>,
@@ -171,6 +174,7 @@ pub fn read_scene(path: &Path) -> Result<PbrtScene, ImportError> {
         named_materials: HashMap::new(),
         textures: HashMap::new(),
         objects: HashMap::new(),
+        depth: vec![0],
         current: 0,
         camera_ctm: None,
         open: Vec::new(),
@@ -377,6 +381,7 @@ impl Parser {
                 self.current = self.scene.objects.len() as u32;
                 self.objects.insert(name.clone(), self.current);
                 self.scene.objects.push(ObjectDesc { name, ..Default::default() });
+                self.depth.push(0);
             }
             "ObjectEnd" => {
                 if self.current == 0 {
@@ -394,7 +399,17 @@ impl Parser {
                 if ctm.inverse().is_none() {
                     return Err(loc.err(format!("ObjectInstance \"{name}\": the transform is not invertible")));
                 }
-                self.scene.objects[self.current as usize].instances.push((o, ctm));
+                let levels = self.depth[o as usize] + 1;
+                if levels > megaray_base::MAX_NESTING {
+                    let max = megaray_base::MAX_NESTING;
+                    return Err(loc.err(format!(
+                        "objects nest more than {max} levels deep (\"{name}\" holds {} levels)",
+                        levels - 1
+                    )));
+                }
+                let c = self.current as usize;
+                self.depth[c] = self.depth[c].max(levels);
+                self.scene.objects[c].instances.push((o, ctm));
             }
             _ => {
                 return Err(loc.err(format!("unknown statement {word}")));
