@@ -50,8 +50,8 @@ pub fn import(name: &str, data: &[u8]) {
     let _ = megaray_import::import_file(&path, &opts, &mut Check(0), &NoProgress);
 }
 
-/// `data` split at the first `marker` (a line of its own): what comes before it, and after it
-/// (empty when there is no marker).
+/// `data` split at the first `marker` (wherever it stands): what comes before it, and after
+/// it (empty when there is no marker).
 pub fn split<'a>(data: &'a [u8], marker: &[u8]) -> (&'a [u8], &'a [u8]) {
     match data.windows(marker.len()).position(|w| w == marker) {
         Some(i) => (&data[..i], &data[i + marker.len()..]),

@@ -3,8 +3,8 @@
 //! parsed and every object's shapes read, as `megaray build scene.pbrt` reads them.
 fn main() {
     afl::fuzz!(|data: &[u8]| {
-        let (scene, rest) = megaray_fuzz::split(data, b"#INC\n");
-        let (inc, ply) = megaray_fuzz::split(rest, b"#PLY\n");
+        let (text, ply) = megaray_fuzz::split(data, b"#PLY\n");
+        let (scene, inc) = megaray_fuzz::split(text, b"#INC\n");
         megaray_fuzz::file("inc.pbrt", inc);
         megaray_fuzz::file("m.ply", ply);
         megaray_fuzz::pbrt("scene.pbrt", scene);

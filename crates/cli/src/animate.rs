@@ -53,7 +53,7 @@ pub fn parse_animate(spec: &str) -> Result<Animate> {
     }
 }
 
-/// `X,Y,Z/X,Y,Z/...`: two points or more, finite.
+/// `X,Y,Z/X,Y,Z/...`: two points or more, finite, and a finite length.
 fn parse_path(s: &str) -> Option<Vec<Vec3>> {
     let point = |p: &str| -> Option<Vec3> {
         let v: Vec<f32> =
@@ -61,7 +61,8 @@ fn parse_path(s: &str) -> Option<Vec<Vec3>> {
         (v.len() == 3).then(|| Vec3::new(v[0], v[1], v[2]))
     };
     let pts: Vec<Vec3> = s.split('/').map(point).collect::<Option<_>>()?;
-    (pts.len() >= 2).then_some(pts)
+    let length: f32 = pts.windows(2).map(|w| (w[1] - w[0]).length()).sum();
+    (pts.len() >= 2 && length.is_finite()).then_some(pts)
 }
 
 /// The point a fraction `s` (0..=1) of the way along polyline `pts` by length (the first
@@ -226,6 +227,7 @@ mod tests {
             "5:path=1,2/3,4",
             "5:path=1,2,3/a,b,c",
             "5:path=1,2,3/4,5,inf",
+            "5:path=0,0,0/3e38,0,0/-3e38,0,0",
             "5:path 1,2,3/4,5,6",
         ] {
             assert!(parse_animate(bad).is_err(), "{bad}");

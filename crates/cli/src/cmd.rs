@@ -684,17 +684,26 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
     .with_lod_error(a.lod_error.unwrap_or(if area.is_some() { 0.0 } else { 1.0 }));
     // `-o name_####.png`: each frame of an animation or orbit to its own file.
     let numbered = animate.is_some() || a.orbit.is_some();
-    let mut each =
-        |f: u32, img: &megaray_render::Image| match numbered.then(|| crate::animate::frame_path(&a.out, f)).flatten() {
+    let fault = || scene.first_error().or_else(|| pager.as_ref().and_then(|p| p.first_error()));
+    let mut each = |f: u32, img: &megaray_render::Image| -> Result<()> {
+        // A frame drawn while a tile could not be read is not written.
+        if let Some(e) = fault() {
+            return Err(e.into());
+        }
+        match numbered.then(|| crate::animate::frame_path(&a.out, f)).flatten() {
             Some(p) => save(img, &p, exr, a.exposure, curve),
             None => Ok(()),
-        };
+        }
+    };
     let last = |img: &megaray_render::Image| match numbered && crate::animate::frame_path(&a.out, 0).is_some() {
         true => Ok(()),
         false => save(img, &a.out, exr, a.exposure, curve),
     };
     if let Some(an) = &animate {
         let img = crate::animate::run(an, &scene, &renderer, &mut tracer, &pool, a.json, &mut each)?;
+        if let Some(e) = fault() {
+            return Err(e.into());
+        }
         return last(&img);
     }
     if let Some(spec) = &a.orbit {
@@ -706,7 +715,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             Camera::look_at(at + Vec3::new(c * d.x + s * d.z, d.y, -s * d.x + c * d.z), at, up, fov, w, h)
         };
         let img = crate::paging::orbit(o, renderer, camera, &tracer, &pool, a.json, &mut each)?;
-        if let Some(e) = scene.first_error().or_else(|| pager.as_ref().and_then(|p| p.first_error())) {
+        if let Some(e) = fault() {
             return Err(e.into());
         }
         return last(&img);

@@ -58,6 +58,13 @@ fn corrupt_scene_files() {
     b[megaray_testkit::stored_offset(&scene, t.offset + 200) as usize] ^= 0x40;
     let p = write("tile.mray", &b);
     fails(&["render", &p, "-o", o, "--res", "64x64"], &["tile.mray", "tile", "checksum"]);
+    // Nor is any frame of an orbit written from it.
+    let frames = dir.path().join("f_#.png");
+    fails(
+        &["render", &p, "-o", frames.to_str().unwrap(), "--res", "32x32", "--orbit", "2"],
+        &["tile.mray", "checksum"],
+    );
+    assert!(!dir.path().join("f_0.png").exists(), "a frame drawn from a damaged scene was written");
     fails(&["info", "--verify", &p], &["tile.mray", "checksum"]);
     // The benchmark checks every tile before it traces.
     fails(

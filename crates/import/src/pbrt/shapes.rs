@@ -147,7 +147,7 @@ impl TriangleSink for Moved<'_> {
             return Err(ImportError::new(
                 file,
                 Some(at.clone()),
-                format!("a corner is {what} after the shape's transform"),
+                format!("a corner is {what} (in the file, or after the shape's transform)"),
             ));
         }
         let mut a = attr.clone();
