@@ -178,6 +178,13 @@ with tempfile.TemporaryDirectory() as t:
     put("scene", "tiny-nolod.mray", open(scene, "rb").read())
     subprocess.run([megaray, "build", o, "-o", scene, "-q", "--plain"], check=True)
     put("scene", "tiny-plain.mray", open(scene, "rb").read())
+    # A scene file with instances (objects, nested groups, materials): the pbrt seed built.
+    for name, data in [("scene.pbrt", pbrt), ("inc.pbrt", inc), ("m.ply", ply("ascii"))]:
+        with open(os.path.join(t, name), "wb") as f:
+            f.write(data if isinstance(data, bytes) else data.encode())
+    inst = os.path.join(t, "inst.mray")
+    subprocess.run([megaray, "build", os.path.join(t, "scene.pbrt"), "-o", inst, "-q"], check=True)
+    put("scene", "instanced.mray", open(inst, "rb").read())
     exr = os.path.join(t, "e.exr")
     subprocess.run([megaray, "render", scene, "-o", exr, "--res", "4x2", "-q"], check=True)
     put("env", "tiny.exr", open(exr, "rb").read())
