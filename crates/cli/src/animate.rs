@@ -61,14 +61,18 @@ fn parse_path(s: &str) -> Option<Vec<Vec3>> {
         (v.len() == 3).then(|| Vec3::new(v[0], v[1], v[2]))
     };
     let pts: Vec<Vec3> = s.split('/').map(point).collect::<Option<_>>()?;
-    let length: f32 = pts.windows(2).map(|w| (w[1] - w[0]).length()).sum();
-    (pts.len() >= 2 && length.is_finite()).then_some(pts)
+    (pts.len() >= 2 && length(&pts).is_finite()).then_some(pts)
+}
+
+/// The length of polyline `pts`.
+fn length(pts: &[Vec3]) -> f32 {
+    pts.windows(2).map(|w| (w[1] - w[0]).length()).sum()
 }
 
 /// The point a fraction `s` (0..=1) of the way along polyline `pts` by length (the first
 /// point for a path of no length).
 fn along(pts: &[Vec3], s: f32) -> Vec3 {
-    let total: f32 = pts.windows(2).map(|w| (w[1] - w[0]).length()).sum();
+    let total = length(pts);
     let mut left = s.clamp(0.0, 1.0) * total;
     for w in pts.windows(2) {
         let len = (w[1] - w[0]).length();

@@ -6,6 +6,25 @@ use std::path::Path;
 use megaray_base::{Affine, Vec3};
 use megaray_import::pbrt::{read_scene, ShapeKind};
 
+/// The triangles an object's shapes give, as the build reads them.
+struct Tris(Vec<[[f32; 3]; 3]>);
+
+impl megaray_import::TriangleSink for Tris {
+    fn triangle(&mut self, p: [[f32; 3]; 3], _: &megaray_import::TriAttr) -> Result<(), megaray_import::ImportError> {
+        self.0.push(p);
+        Ok(())
+    }
+    fn material(&mut self, _: megaray_import::Material) -> u32 {
+        0
+    }
+}
+
+/// Reads object `o`'s shapes into `t`.
+fn feed(o: &megaray_import::pbrt::ObjectDesc, t: &mut Tris) -> Result<(), megaray_import::ImportError> {
+    megaray_import::pbrt::feed_object(o, &megaray_import::ImportOptions::default(), t, &megaray_base::NoProgress)
+        .map(|_| ())
+}
+
 fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
     let p = dir.join(name);
     std::fs::write(&p, text).unwrap();
@@ -170,23 +189,8 @@ ObjectEnd
     assert!(close(normal(&a.triangles[0]), -Vec3::Y), "{:?}", a.triangles);
     assert!(close(normal(&b.triangles[0]), Vec3::Y));
     // The build winds the shape's own triangles the same way.
-    struct Tris(Vec<[[f32; 3]; 3]>);
-    impl megaray_import::TriangleSink for Tris {
-        fn triangle(
-            &mut self,
-            p: [[f32; 3]; 3],
-            _: &megaray_import::TriAttr,
-        ) -> Result<(), megaray_import::ImportError> {
-            self.0.push(p);
-            Ok(())
-        }
-        fn material(&mut self, _: megaray_import::Material) -> u32 {
-            0
-        }
-    }
     let mut t = Tris(Vec::new());
-    let opts = megaray_import::ImportOptions::default();
-    megaray_import::pbrt::feed_object(world, &opts, &mut t, &megaray_base::NoProgress).unwrap();
+    feed(world, &mut t).unwrap();
     assert_eq!(t.0[0], a.triangles[0]);
     // An area light inside an object is drawn but does not emit.
     assert_eq!(s.skipped.get("AreaLightSource inside ObjectBegin (drawn, but emits nothing)"), Some(&1));
@@ -237,28 +241,12 @@ fn a_transform_overflowing_the_corners_is_an_error_at_the_shape() {
     let text = "WorldBegin\nScale 1e30 1e30 1e30\n  Shape \"trianglemesh\" \"point3 P\" [0 0 0 1e30 0 0 0 1 0] \"integer indices\" [0 1 2]";
     let p = write(dir.path(), "far.pbrt", text);
     let s = read_scene(&p).unwrap();
-    struct Finite(usize);
-    impl megaray_import::TriangleSink for Finite {
-        fn triangle(
-            &mut self,
-            p: [[f32; 3]; 3],
-            _: &megaray_import::TriAttr,
-        ) -> Result<(), megaray_import::ImportError> {
-            assert!(p.iter().flatten().all(|x| x.is_finite()), "a non-finite corner passed on");
-            self.0 += 1;
-            Ok(())
-        }
-        fn material(&mut self, _: megaray_import::Material) -> u32 {
-            0
-        }
-    }
-    let opts = megaray_import::ImportOptions::default();
-    let e = s.objects.iter().try_for_each(|o| {
-        megaray_import::pbrt::feed_object(o, &opts, &mut Finite(0), &megaray_base::NoProgress).map(|_| ())
-    });
+    let mut t = Tris(Vec::new());
+    let e = s.objects.iter().try_for_each(|o| feed(o, &mut t));
     let e = e.expect_err("an infinite corner").to_string();
     assert!(e.contains("far.pbrt") && e.contains("line 3:3") && e.contains("infinite"), "{e}");
     assert!(!e.contains('\n'), "one line: {e}");
+    assert!(t.0.iter().flatten().flatten().all(|x| x.is_finite()), "a non-finite corner passed on");
 }
 
 /// Objects placing objects nest up to `MAX_NESTING` levels; one more is one line of error at
