@@ -249,7 +249,13 @@ impl<T: Transport> Cluster<T> {
                     r.settings.visibility = shown;
                     tracer.set_lod_error(lod_error);
                     let silence = 2 * self.opts.timeout + Duration::from_secs(10);
+                    if let Some(p) = tracer.pager() {
+                        p.begin_working_set();
+                    }
                     relay(&self.t, r, tracer, pool, frame, self.opts.poll, silence)?;
+                    let tiles = tracer.pager().map_or_else(Vec::new, |p| p.working_set());
+                    let (tag, b) = ToRoot::Seen { frame, tiles }.encode();
+                    self.t.send(0, tag, &b);
                     frames += 1;
                 }
                 ToWorker::Stop => return Ok(frames),
@@ -360,6 +366,9 @@ impl<T: Transport> Cluster<T> {
         });
         res?;
         let busy = busy?.busy;
+        // The other ranks' lookups join this one's working set before the next frame
+        // begins anywhere (they would come behind its pieces otherwise).
+        self.take_seen(Some(tracer), frame, &mut q.comm)?;
         let cam = r.settings.camera;
         self.costs = Some(TileCosts { w: cam.width, h: cam.height, secs: std::mem::take(&mut q.measured) });
         if next {
@@ -437,7 +446,53 @@ impl<T: Transport> Cluster<T> {
         // No render thread here: a sender kept, so that waiting on it only times out.
         let (_keep, none) = mpsc::channel();
         let mut send = Sender { t: &self.t, local: None, threads: &self.threads };
-        q.dispatch(&mut send, &none, &mut self.lost, a.frame, self.opts, &mut |_| {})
+        q.dispatch(&mut send, &none, &mut self.lost, a.frame, self.opts, &mut |_| {})?;
+        self.take_seen(None, a.frame, &mut q.comm)
+    }
+
+    /// Takes every other rank's [`ToRoot::Seen`] of frame `frame` (its lanes closed), adding
+    /// the tiles to `tracer`'s working set when it pages. A rank that sends nothing for the
+    /// timeout is lost.
+    fn take_seen(&mut self, tracer: Option<&Tracer>, frame: u32, comm: &mut FrameComm) -> Result<(), ClusterError> {
+        let n = self.t.size();
+        let mut waiting: Vec<bool> = (0..n).map(|p| p != 0 && !self.lost[p]).collect();
+        let start = Instant::now();
+        while waiting.contains(&true) {
+            match self.t.try_recv() {
+                Some((from, tag, bytes)) if from < n && waiting[from] => {
+                    comm.bytes_in += bytes.len() as u64;
+                    comm.messages += 1;
+                    match ToRoot::decode(from, tag, &bytes)? {
+                        ToRoot::Seen { frame: f, tiles } if f == frame => {
+                            if let Some(p) = tracer.and_then(|t| t.pager()) {
+                                p.note_working_set(&tiles);
+                            }
+                            waiting[from] = false;
+                        }
+                        other => {
+                            let what = format!("{other:?} after frame {frame}");
+                            return Err(ClusterError::Protocol { rank: from, what });
+                        }
+                    }
+                }
+                // A lost rank's late message.
+                Some(_) => {}
+                None if start.elapsed() > self.opts.timeout => {
+                    for (p, w) in waiting.iter_mut().enumerate() {
+                        if std::mem::take(w) {
+                            self.lost[p] = true;
+                            let secs = start.elapsed().as_secs_f64();
+                            // One write: the line stays whole among other ranks' output.
+                            let line =
+                                format!("megaray: rank {p} sent nothing for {secs:.0} s after frame {frame}; going on without it\n");
+                            eprint!("{line}");
+                        }
+                    }
+                }
+                None => std::thread::sleep(self.opts.poll),
+            }
+        }
+        Ok(())
     }
 }
 

@@ -25,6 +25,8 @@ pub const WORK: Tag = 4;
 pub const DONE: Tag = 5;
 /// Root → worker: the session ends.
 pub const STOP: Tag = 6;
+/// Worker → root: the tiles its frame looked up (`Seen`).
+pub const SEEN: Tag = 7;
 
 /// What the root tells a worker.
 #[derive(Clone, Debug, PartialEq)]
@@ -58,6 +60,10 @@ pub enum ToRoot {
     Hello { checksum: u64, threads: u32 },
     /// The tiles of one `Work` message of frame `frame`, rendered.
     Done { frame: u32, pieces: Vec<Piece>, stats: JobStats },
+    /// After frame `frame`'s lanes have closed: the tiles the worker's rays looked up in it
+    /// (its pager's working set; none when it does not page), which the root adds to its
+    /// own, so that the level of detail it steers by is the whole frame's.
+    Seen { frame: u32, tiles: Vec<u32> },
 }
 
 /// Appends little-endian fields.
@@ -281,6 +287,12 @@ impl ToRoot {
                 }
                 DONE
             }
+            ToRoot::Seen { frame, tiles } => {
+                o.u32(*frame);
+                o.u32(tiles.len() as u32);
+                o.bytes(bytemuck::cast_slice(tiles));
+                SEEN
+            }
         };
         (tag, o.0)
     }
@@ -326,6 +338,11 @@ impl ToRoot {
                     pieces.push(p);
                 }
                 ToRoot::Done { frame, pieces, stats }
+            }
+            SEEN => {
+                let frame = i.u32()?;
+                let n = i.u32()? as usize;
+                ToRoot::Seen { frame, tiles: i.pods(n)? }
             }
             t => return Err(ClusterError::Protocol { rank: from, what: format!("unknown message tag {t}") }),
         };
@@ -398,6 +415,8 @@ mod tests {
         for m in [
             ToRoot::Hello { checksum: 0xdead_beef_0123, threads: 4 },
             ToRoot::Done { frame: 9, pieces: vec![piece(false, false), piece(true, true), piece(false, true)], stats },
+            ToRoot::Seen { frame: 3, tiles: vec![0, 7, 1 << 30] },
+            ToRoot::Seen { frame: 4, tiles: Vec::new() },
         ] {
             let (tag, bytes) = m.encode();
             assert_eq!(ToRoot::decode(1, tag, &bytes).unwrap(), m);
@@ -417,6 +436,13 @@ mod tests {
         long.push(0);
         assert!(ToRoot::decode(2, tag, &long).is_err());
         // A lying count.
+        let mut lying = bytes.clone();
+        lying[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(ToRoot::decode(2, tag, &lying).is_err());
+        let (tag, bytes) = ToRoot::Seen { frame: 1, tiles: vec![5, 6] }.encode();
+        for n in 0..bytes.len() {
+            assert!(ToRoot::decode(2, tag, &bytes[..n]).is_err());
+        }
         let mut lying = bytes.clone();
         lying[4..8].copy_from_slice(&u32::MAX.to_le_bytes());
         assert!(ToRoot::decode(2, tag, &lying).is_err());

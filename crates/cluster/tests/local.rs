@@ -164,6 +164,55 @@ fn a_frame_begun_and_not_asked_for_is_finished_and_thrown_away() {
     });
 }
 
+/// The root's pager ends a frame with the whole frame's working set (its own lookups and the
+/// other ranks'), which the level-of-detail governor steers by: the same tiles as one
+/// process's frame, however the tiles were shared out.
+#[test]
+fn the_roots_working_set_is_the_whole_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = megaray_testkit::gen(dir.path(), "plant:30k");
+    let (path, _) = megaray_testkit::build_without_lod(dir.path(), &[ply], "plant", Some(2000));
+    let scene = Scene::open(&path).unwrap();
+    let checksum = scene.header().header_checksum;
+    let budget = 64 << 20;
+    let open = || Pager::open(&path, PagerOptions { budget, fetchers: 1 }).unwrap();
+    let r = renderer(&scene, false);
+    // One process: the frame's lookups.
+    let one = open();
+    let tracer = Tracer::paged(&one);
+    one.begin_working_set();
+    pool().install(|| render_frame(&r, &tracer, 0));
+    let want = one.working_set();
+    assert!(want.len() > 10, "{} tiles", want.len());
+    let mut ranks = world(3);
+    let root_t = ranks.remove(0);
+    std::thread::scope(|s| {
+        for t in ranks {
+            let (scene, open) = (&scene, &open);
+            s.spawn(move || {
+                let pager = open();
+                let mut r = renderer(scene, false);
+                let mut c = Cluster::join(t, checksum, 1, opts()).unwrap();
+                c.serve(&mut r, None, &Tracer::paged(&pager), &pool()).unwrap();
+            });
+        }
+        let root_pager = open();
+        let tracer = Tracer::paged(&root_pager);
+        let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
+        let p = pool();
+        let lost = as_root(&mut c, |c| {
+            for frame in [0, 0] {
+                root_pager.begin_working_set();
+                c.render_frame(&r, &tracer, &p, frame, false).unwrap();
+                assert!(c.last.root_tiles < c.last.tiles, "the other ranks rendered nothing");
+                assert_eq!(root_pager.working_set(), want);
+                assert_eq!(root_pager.working_set_bytes(), one.working_set_bytes());
+            }
+        });
+        assert!(lost.is_empty());
+    });
+}
+
 #[test]
 fn a_rank_with_another_scene_file_stops_the_start() {
     let mut ranks = world(3);

@@ -159,6 +159,17 @@ pub struct Pager {
     fetchers: Vec<JoinHandle<()>>,
 }
 
+impl Shared {
+    /// Counts tile `t` into the working set, once.
+    #[inline]
+    fn note(&self, t: u32) {
+        let (m, seen) = (self.mark.load(Relaxed), &self.seen[t as usize]);
+        if seen.load(Relaxed) != m && seen.swap(m, Relaxed) != m {
+            self.working.fetch_add(self.cost[t as usize], Relaxed);
+        }
+    }
+}
+
 struct Shared {
     scene: Arc<Scene>,
     state: Vec<AtomicU32>,
@@ -168,6 +179,11 @@ struct Shared {
     cost: Vec<u64>,
     /// How many times each tile's pages were released (a generation, for tests).
     releases: Vec<AtomicU32>,
+    /// The working set ([`Pager::begin_working_set`]): each tile's mark when it was last
+    /// looked up, the current mark, and the bytes of the tiles looked up under it.
+    seen: Vec<AtomicU32>,
+    mark: AtomicU32,
+    working: AtomicU64,
     /// When each tile was last loaded, in milliseconds since `start`.
     loaded_at: Vec<AtomicU64>,
     start: Instant,
@@ -297,6 +313,9 @@ impl Pager {
             want: (0..n).map(|_| AtomicU32::new(0)).collect(),
             cost,
             releases: (0..n).map(|_| AtomicU32::new(0)).collect(),
+            seen: (0..n).map(|_| AtomicU32::new(0)).collect(),
+            mark: AtomicU32::new(1),
+            working: AtomicU64::new(0),
             loaded_at: (0..n).map(|_| AtomicU64::new(0)).collect(),
             start: Instant::now(),
             queue: Mutex::new(Vec::new()),
@@ -383,6 +402,9 @@ impl Pager {
         let Some(word) = s.state.get(t as usize) else { return Access::Corrupt };
         // SeqCst: ordered after the pin's epoch check (see `Shared::pin`).
         let st = word.load(SeqCst);
+        if st & PINNED == 0 {
+            s.note(t);
+        }
         if st & AVAIL != 0 {
             if st & (REFD | FRESH) != REFD {
                 word.fetch_or(REFD, Relaxed);
@@ -396,6 +418,45 @@ impl Pager {
         s.misses.fetch_add(1, Relaxed);
         self.request(t);
         Access::Missing
+    }
+
+    /// Starts a new working set: the tiles (not pinned) that traversal looks up from now on,
+    /// present or not, each counted once. A frame's working set is a function of what its
+    /// rays need, not of what was resident or of which thread or process traced them, so a
+    /// renderer that steers the level of detail by it ([`Pager::working_set_bytes`]) makes
+    /// the same choices however the frame is divided. Call it between frames.
+    pub fn begin_working_set(&self) {
+        let s = &self.shared;
+        let next = s.mark.load(Relaxed).wrapping_add(1).max(1);
+        if next == 1 {
+            // The marks wrapped: forget the old ones, which could equal new ones.
+            s.seen.iter().for_each(|m| m.store(0, Relaxed));
+        }
+        s.mark.store(next, Relaxed);
+        s.working.store(0, Relaxed);
+    }
+
+    /// The resident bytes the working set's tiles take (page-rounded, as the budget counts).
+    pub fn working_set_bytes(&self) -> u64 {
+        self.shared.working.load(Relaxed)
+    }
+
+    /// The working set's tiles, in tile order (to send to another process).
+    pub fn working_set(&self) -> Vec<u32> {
+        let s = &self.shared;
+        let m = s.mark.load(Relaxed);
+        (0..s.seen.len() as u32).filter(|&t| s.seen[t as usize].load(Relaxed) == m).collect()
+    }
+
+    /// Adds tiles another process looked up to the working set (those out of range or
+    /// pinned are ignored), as if traversal here had looked them up.
+    pub fn note_working_set(&self, tiles: &[u32]) {
+        let s = &self.shared;
+        for &t in tiles {
+            if s.state.get(t as usize).is_some_and(|w| w.load(Relaxed) & PINNED == 0) {
+                s.note(t);
+            }
+        }
     }
 
     /// Asks for tile `t` (a prefetch, or a miss). Deduplicated: a tile already asked for

@@ -138,6 +138,53 @@ fn the_coarsest_levels_are_pinned() {
     assert!(st.pinned > 0 && st.peak_resident <= st.tile_budget, "{st:?}");
 }
 
+/// A working set counts each tile looked up once (present or missing), not the pinned ones,
+/// adds tiles noted by another process (ignoring numbers out of range), and starts empty
+/// again; its bytes are the tiles' resident costs, whatever was loaded or evicted.
+#[test]
+fn the_working_set_is_what_was_looked_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = gen(dir.path(), "plant:120k");
+    let (path, _) = build(dir.path(), &[ply], "lod", Some(20_000));
+    let probe = Scene::open(&path).unwrap();
+    let budget = Pager::min_budget(&probe);
+    drop(probe);
+    let pager = Pager::open(&path, PagerOptions { budget, fetchers: 1 }).unwrap();
+    let n = pager.scene().tiles().len() as u32;
+    let pinned: Vec<u32> = (0..n).filter(|&t| pager.is_resident(t)).collect();
+    let free: Vec<u32> = (0..n).filter(|t| !pinned.contains(t)).collect();
+    assert!(!pinned.is_empty() && free.len() >= 6, "{} pinned, {} not", pinned.len(), free.len());
+    let alone = |ts: &[u32]| {
+        pager.begin_working_set();
+        pager.note_working_set(ts);
+        pager.working_set_bytes()
+    };
+    let cost: Vec<u64> = free.iter().map(|&t| alone(&[t])).collect();
+    assert!(cost.iter().all(|&c| c > 0 && c % 4096 == 0), "{cost:?}");
+    pager.begin_working_set();
+    assert_eq!((pager.working_set(), pager.working_set_bytes()), (Vec::new(), 0));
+    // Looked up, twice each, loaded or not; the pinned ones too (not counted).
+    for &t in free[..4].iter().chain(&free[..4]).chain(&pinned) {
+        let _pin = pager.pin();
+        pager.acquire(t);
+    }
+    // Noted from elsewhere: one already seen, a new one, a pinned one, one out of range.
+    pager.note_working_set(&[free[1], free[5], pinned[0], n + 7]);
+    let want = vec![free[0], free[1], free[2], free[3], free[5]];
+    assert_eq!(pager.working_set(), want);
+    assert_eq!(pager.working_set_bytes(), cost[..4].iter().sum::<u64>() + cost[5]);
+    // Every tile looked up until loaded (evicting within the budget, some looked up many
+    // times): each once.
+    for &t in &free {
+        fetch(&pager, t);
+    }
+    assert!(pager.stats().evicted > 0);
+    assert_eq!(pager.working_set(), free);
+    assert_eq!(pager.working_set_bytes(), cost.iter().sum::<u64>());
+    pager.begin_working_set();
+    assert_eq!((pager.working_set(), pager.working_set_bytes()), (Vec::new(), 0));
+}
+
 /// Many threads asking for tiles at random under a budget of one tile more than the least,
 /// with many fetchers evicting at once: a tile found available always holds its checked
 /// bytes, and every tile available at the end does too. (A fetcher could once load a tile

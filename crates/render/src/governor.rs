@@ -1,7 +1,15 @@
 //! The budget steers the level of detail ([`LodGovernor`]): when a frame's working set at the
-//! error asked for does not fit the pager's budget (the frame evicts what it loads), the
-//! error allowed rises until it does, so that frames stop re-reading the disk; when there is
-//! room again it falls back toward the error asked for.
+//! error asked for does not fit the pager's budget, the error allowed rises until it does, so
+//! that frames stop re-reading the disk; when there is room again it falls back toward the
+//! error asked for.
+//!
+//! The working set is what the frame's rays looked up ([`Pager::begin_working_set`]), not
+//! what the pager loaded or evicted: the same rays ask for the same tiles however many
+//! threads or processes trace them and whatever was resident, so the errors chosen, and the
+//! images, are the same (a cluster's ranks add their lookups to the root's pager,
+//! `megaray-cluster`).
+//!
+//! [`Pager::begin_working_set`]: megaray_page::Pager::begin_working_set
 
 use megaray_trace::Tracer;
 
@@ -9,6 +17,10 @@ use megaray_trace::Tracer;
 const MAX_RISE: f32 = 256.0;
 /// The factor of one step up or down.
 const STEP: f32 = 1.5;
+/// The share of the budget under which a working set lets the error fall a step: below
+/// what a step finer would need (about `STEP` squared as many tiles, for surfaces seen
+/// face on), so that the error does not swing back and forth between two steps.
+const ROOM: f64 = 0.4;
 
 /// Per-frame control of a paged tracer's level-of-detail error. Call
 /// [`LodGovernor::after_frame`] after each frame.
@@ -16,16 +28,17 @@ const STEP: f32 = 1.5;
 pub struct LodGovernor {
     requested: f32,
     effective: f32,
-    loaded: u64,
-    evicted: u64,
 }
 
 impl LodGovernor {
-    /// A governor for `tracer`, whose error asked for is its current one.
+    /// A governor for `tracer`, whose error asked for is its current one. Starts the first
+    /// frame's working set.
     pub fn new(tracer: &Tracer) -> LodGovernor {
-        let s = tracer.pager().map(|p| p.stats()).unwrap_or_default();
+        if let Some(p) = tracer.pager() {
+            p.begin_working_set();
+        }
         let e = tracer.lod_error();
-        LodGovernor { requested: e, effective: e, loaded: s.bytes_loaded, evicted: s.evicted }
+        LodGovernor { requested: e, effective: e }
     }
 
     /// The error in force (footprints).
@@ -33,21 +46,21 @@ impl LodGovernor {
         self.effective
     }
 
-    /// After a frame: raises the error when the frame evicted tiles while loading more than a
-    /// quarter of the budget (its working set does not fit), lowers it toward the error asked
-    /// for when the frame evicted nothing and the resident tiles fill less than 60% of the
-    /// budget. Sets it on `tracer` and returns it. No-op without a pager or levels of detail.
+    /// After a frame: raises the error when the frame's working set exceeded the budget for
+    /// tiles, lowers it toward the error asked for when it took less than [`ROOM`] of it.
+    /// Sets it on `tracer`, starts the next frame's working set, and returns the error.
+    /// No-op without a pager or levels of detail.
     pub fn after_frame(&mut self, tracer: &Tracer) -> f32 {
         let Some(p) = tracer.pager() else { return self.effective };
+        let working = p.working_set_bytes();
+        p.begin_working_set();
         if self.requested <= 0.0 || tracer.scene().header().lod_part_count == 0 {
             return self.effective;
         }
-        let s = p.stats();
-        let (loaded, evicted) = (s.bytes_loaded - self.loaded, s.evicted - self.evicted);
-        (self.loaded, self.evicted) = (s.bytes_loaded, s.evicted);
-        if evicted > 0 && loaded > s.tile_budget / 4 {
+        let budget = p.stats().tile_budget;
+        if working > budget {
             self.effective = (self.effective * STEP).min(self.requested * MAX_RISE);
-        } else if evicted == 0 && (s.resident as f64) < 0.6 * s.tile_budget as f64 {
+        } else if (working as f64) < ROOM * budget as f64 {
             self.effective = (self.effective / STEP).max(self.requested);
         }
         tracer.set_lod_error(self.effective);
