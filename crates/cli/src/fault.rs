@@ -11,6 +11,7 @@
 //!   fails with `EFBIG` and the writer's error path (one line, temporary removed) runs.
 
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::OnceLock;
 
 /// The line the SIGBUS handler writes, made before any fault (the handler only writes it).
@@ -40,8 +41,9 @@ pub fn watch(scene: &Path) {
     if !first {
         return;
     }
-    // SAFETY: sigaction with a zeroed struct, an empty mask and a handler that only calls
-    // async-signal-safe functions (write, _exit) on data initialised before installation.
+    // SAFETY: sigaction with a zeroed struct, an empty mask and a handler that only does
+    // async-signal-safe things (a lock-free atomic swap, write, pause, _exit) on data
+    // initialised before installation.
     unsafe {
         let mut sa: libc::sigaction = std::mem::zeroed();
         sa.sa_sigaction = on_sigbus as extern "C" fn(libc::c_int) as usize;
@@ -50,7 +52,19 @@ pub fn watch(scene: &Path) {
     }
 }
 
+/// Whether a thread has taken the fault: several render threads may fault at once, and the
+/// line is written once.
+static FIRED: AtomicBool = AtomicBool::new(false);
+
 extern "C" fn on_sigbus(_sig: libc::c_int) {
+    if FIRED.swap(true, Ordering::SeqCst) {
+        // Another thread is writing the line and ends the process: wait for it (an exit
+        // here could cut its line off).
+        loop {
+            // SAFETY: pause is async-signal-safe.
+            unsafe { libc::pause() };
+        }
+    }
     if let Some(m) = MESSAGE.get() {
         // SAFETY: write(2) of a live, immutable buffer; _exit skips handlers and destructors.
         unsafe {
