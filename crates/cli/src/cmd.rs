@@ -786,7 +786,7 @@ pub fn render(a: RenderArgs, bars: &Bars) -> Result<()> {
             serde_json::json!({
                 "out": a.out, "width": w, "height": h, "spp": a.spp, "adaptive": a.adaptive, "adaptive_pixels": renderer.sampled_more(), "shader": shader.name(),
                 "frames": frames, "seconds": secs, "setup_seconds": setup, "fps": frames as f64 / secs,
-                "rays": acc.rays(), "mrays_s": mrays, "error_estimate": acc.error(),
+                "rays": acc.rays(), "mrays_s": mrays, "error_estimate": acc.error(), "lod_error": tracer.lod_error(),
                 "light_samples": a.light_samples, "env_lights": a.env_lights, "light_subsets": a.light_subsets,
                 "threads": pool.current_num_threads(),
                 "paging": crate::paging::stats_json(pager.as_ref(), &acc.jobs()),

@@ -38,9 +38,10 @@ fn two_ranks_write_the_same_png_as_one_process() {
     let bin = bin.to_str().unwrap();
     let cases: [&[&str]; 5] = [
         &["--shader", "auto"],
-        // The level of detail steered by the budget (the error rises over the frames): the
-        // root steers by the whole frame's working set, all ranks' lookups.
-        &["--shader", "env", "--sky", "sky:width=64", "--frames", "6", "--mem", "1M"],
+        // The level of detail steered by the budget: the error rises over the frames (checked
+        // below), as rank 0 steers by the whole frame's working set, every rank's lookups (by
+        // its own alone, the whole frame's would seem to fit: the error stays at 1).
+        &["--shader", "env", "--sky", "sky:width=64", "--frames", "6", "--mem", "2400K"],
         &["--shader", "env", "--sky", "sky:width=64", "--frames", "3", "--light-samples", "2"],
         &["--shader", "env", "--sky", "sky:width=64", "--frames", "2", "--denoise", "--mem", "1M", "--lod-error", "0"],
         &["--shader", "ao", "--spp", "2", "--mem", "1M", "--lod-error", "0"],
@@ -49,10 +50,11 @@ fn two_ranks_write_the_same_png_as_one_process() {
         let one = dir.path().join(format!("one{k}.png")).to_string_lossy().into_owned();
         let two = dir.path().join(format!("two{k}.png")).to_string_lossy().into_owned();
         let common = ["--res", "150x100", "--threads", "1", "-q"];
-        let mut args = vec!["render", &s, "-o", &one];
+        let mut args = vec!["render", &s, "-o", &one, "--json"];
         args.extend(common.iter().chain(extra.iter()));
-        let (code, _, err) = run(&args);
+        let (code, out, err) = run(&args);
         assert_eq!(code, 0, "{err}");
+        let alone: serde_json::Value = serde_json::from_str(&out).unwrap();
         let mut args = vec!["-n", "2", bin, "render", &s, "-o", &two, "--json"];
         args.extend(common.iter().chain(extra.iter()));
         let out = mpirun(&args).output().unwrap();
@@ -62,6 +64,10 @@ fn two_ranks_write_the_same_png_as_one_process() {
         assert_eq!(v["cluster"]["ranks"], 2);
         assert!(v["cluster"]["root_tile_share"].as_f64().unwrap() < 1.0, "rank 1 rendered nothing: {v}");
         assert_eq!(std::fs::read(&one).unwrap(), std::fs::read(&two).unwrap(), "{extra:?}: the images differ");
+        assert_eq!(v["lod_error"], alone["lod_error"], "{extra:?}");
+        if extra.contains(&"2400K") {
+            assert!(v["lod_error"].as_f64().unwrap() > 1.0, "the error did not rise: {v}");
+        }
     }
 }
 

@@ -201,9 +201,11 @@ fn the_roots_working_set_is_the_whole_frames() {
         let mut c = Some(Cluster::join(root_t, checksum, 1, opts()).unwrap());
         let p = pool();
         let lost = as_root(&mut c, |c| {
-            for frame in [0, 0] {
+            // Again with other tiles resident; then with frame 1 begun ahead and thrown away
+            // (the ranks' lookups for it are not counted).
+            for next in [false, false, true, false] {
                 root_pager.begin_working_set();
-                c.render_frame(&r, &tracer, &p, frame, false).unwrap();
+                c.render_frame(&r, &tracer, &p, 0, next).unwrap();
                 assert!(c.last.root_tiles < c.last.tiles, "the other ranks rendered nothing");
                 assert_eq!(root_pager.working_set(), want);
                 assert_eq!(root_pager.working_set_bytes(), one.working_set_bytes());

@@ -70,6 +70,10 @@ const FRESH: u32 = 32;
 /// part, what a ray falls back on when nothing finer is resident.
 const PINNED: u32 = 64;
 
+/// How long the one steering by the working set may be silent before another takes over
+/// ([`Pager::steer`]).
+pub const STEER_STALE_MS: u64 = 2000;
+
 /// How long a loaded tile nobody has used yet is protected from eviction.
 const FRESH_MS: u64 = 50;
 
@@ -165,7 +169,7 @@ impl Shared {
     fn note(&self, t: u32) {
         let (m, seen) = (self.mark.load(Relaxed), &self.seen[t as usize]);
         if seen.load(Relaxed) != m && seen.swap(m, Relaxed) != m {
-            self.working.fetch_add(self.cost[t as usize], Relaxed);
+            self.working[(m & 1) as usize].fetch_add(self.cost[t as usize], Relaxed);
         }
     }
 }
@@ -183,7 +187,13 @@ struct Shared {
     /// looked up, the current mark, and the bytes of the tiles looked up under it.
     seen: Vec<AtomicU32>,
     mark: AtomicU32,
-    working: AtomicU64,
+    /// Indexed by the mark's parity: a lookup that read the mark just before a new working
+    /// set began counts into the old one's bytes, not the new one's.
+    working: [AtomicU64; 2],
+    /// Who steers by the working set ([`Pager::steer`]): an id, and when it last did (ms
+    /// since `start`).
+    steerer: AtomicU64,
+    steered_at: AtomicU64,
     /// When each tile was last loaded, in milliseconds since `start`.
     loaded_at: Vec<AtomicU64>,
     start: Instant,
@@ -315,7 +325,9 @@ impl Pager {
             releases: (0..n).map(|_| AtomicU32::new(0)).collect(),
             seen: (0..n).map(|_| AtomicU32::new(0)).collect(),
             mark: AtomicU32::new(1),
-            working: AtomicU64::new(0),
+            working: [AtomicU64::new(0), AtomicU64::new(0)],
+            steerer: AtomicU64::new(0),
+            steered_at: AtomicU64::new(0),
             loaded_at: (0..n).map(|_| AtomicU64::new(0)).collect(),
             start: Instant::now(),
             queue: Mutex::new(Vec::new()),
@@ -421,10 +433,13 @@ impl Pager {
     }
 
     /// Starts a new working set: the tiles (not pinned) that traversal looks up from now on,
-    /// present or not, each counted once. A frame's working set is a function of what its
-    /// rays need, not of what was resident or of which thread or process traced them, so a
-    /// renderer that steers the level of detail by it ([`Pager::working_set_bytes`]) makes
-    /// the same choices however the frame is divided. Call it between frames.
+    /// present or not, each counted once. The working set of a frame whose rays are traced to
+    /// the end is a function of those rays, not of what was resident or of which thread or
+    /// process traced them, so a renderer that steers the level of detail by it
+    /// ([`Pager::working_set_bytes`]) makes the same choices however the frame is divided.
+    /// (A ray that takes a stand-in for a missing tile also looks up the coarser levels it
+    /// tried, and a frame cut short by a deadline only what it traced.) Call it between
+    /// frames.
     pub fn begin_working_set(&self) {
         let s = &self.shared;
         let next = s.mark.load(Relaxed).wrapping_add(1).max(1);
@@ -432,13 +447,40 @@ impl Pager {
             // The marks wrapped: forget the old ones, which could equal new ones.
             s.seen.iter().for_each(|m| m.store(0, Relaxed));
         }
+        s.working[(next & 1) as usize].store(0, Relaxed);
         s.mark.store(next, Relaxed);
-        s.working.store(0, Relaxed);
     }
 
     /// The resident bytes the working set's tiles take (page-rounded, as the budget counts).
     pub fn working_set_bytes(&self) -> u64 {
-        self.shared.working.load(Relaxed)
+        let s = &self.shared;
+        s.working[(s.mark.load(Relaxed) & 1) as usize].load(Relaxed)
+    }
+
+    /// Makes the caller, known by `id` (non-zero, its own), the one that steers by the
+    /// working set ([`Pager::steer`]), whoever did before: the newest frame loop steers.
+    pub fn take_steering(&self, id: u64) {
+        let s = &self.shared;
+        s.steerer.store(id, Relaxed);
+        s.steered_at.store(s.start.elapsed().as_millis() as u64, Relaxed);
+    }
+
+    /// Whether the caller, known by `id`, still steers by the working set: it took over
+    /// last ([`Pager::take_steering`]), or the one that did has not asked for
+    /// [`STEER_STALE_MS`] (its viewer closed) and the caller takes over. Several viewers
+    /// share a pager (one a page in `serve`), and each frame's end would begin a new working
+    /// set under the others' frames: one of them steers, the others follow its error.
+    pub fn steer(&self, id: u64) -> bool {
+        let s = &self.shared;
+        let now = s.start.elapsed().as_millis() as u64;
+        let owner = s.steerer.load(Relaxed);
+        let mine = owner == id
+            || ((owner == 0 || now.saturating_sub(s.steered_at.load(Relaxed)) > STEER_STALE_MS)
+                && s.steerer.compare_exchange(owner, id, Relaxed, Relaxed).is_ok());
+        if mine {
+            s.steered_at.store(now, Relaxed);
+        }
+        mine
     }
 
     /// The working set's tiles, in tile order (to send to another process).

@@ -85,3 +85,30 @@ fn the_budget_steers_the_error() {
     render_progressive(&r, &tracer, stop, |_| {});
     assert_eq!(tracer.lod_error(), 1.0);
 }
+
+/// Two governors over one pager (two pages of `serve`): the newer steers, by the working set
+/// of what was looked up; the older follows the error it finds and leaves the working set
+/// alone (beginning a new one would cut the other's frame short).
+#[test]
+fn of_two_governors_over_one_pager_the_newer_steers() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("plant.ply");
+    megaray_gen::write_ply(&"plant:100k".parse().unwrap(), &ply, &megaray_base::NoProgress).unwrap();
+    let path = build_file(dir.path(), &ply, "plant");
+    let scene = Scene::open(&path).unwrap();
+    let b = scene.header().bounds;
+    let r = Renderer::new(RenderSettings::new(Camera::framing(&b, Vec3::new(0.1, 0.3, 0.45), 160, 120)), &b);
+    let pager =
+        Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 64 * 1024, fetchers: 2 }).unwrap();
+    let tracer = Tracer::paged(&pager).with_lod_error(1.0);
+    let mut older = LodGovernor::new(&tracer);
+    let mut newer = LodGovernor::new(&tracer);
+    render_frame(&r, &tracer, 0);
+    let looked_up = pager.working_set_bytes();
+    assert!(looked_up > pager.stats().tile_budget, "{looked_up} bytes looked up fit the budget");
+    tracer.set_lod_error(3.0);
+    assert_eq!(older.after_frame(&tracer), 3.0);
+    assert_eq!(pager.working_set_bytes(), looked_up);
+    assert_eq!(newer.after_frame(&tracer), 1.5);
+    assert_eq!((tracer.lod_error(), pager.working_set_bytes()), (1.5, 0));
+}
