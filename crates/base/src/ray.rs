@@ -23,6 +23,31 @@ pub struct Ray {
 const _: () = assert!(std::mem::size_of::<Ray>() == 32);
 
 impl Ray {
+    /// A copy read field by field, each a 4-byte load the compiler may not merge: what a
+    /// tracer's entry reads its ray with. A ray written just before the call (its fields
+    /// stored one by one, as a struct literal of scalars is) is then taken from the pending
+    /// stores at once; a wider load spanning several of them, such as a 16-byte load of the
+    /// direction and `t_min`, waits until they reach the cache (15-25 cycles a ray;
+    /// docs/PERF.md, "A ray's fields read one by one"). Kept in registers, the copy is read
+    /// as it likes.
+    #[inline(always)]
+    pub fn settled(&self) -> Ray {
+        #[inline(always)]
+        fn one(x: &f32) -> f32 {
+            // SAFETY: a read of a live reference to an `f32`; volatile only so that it is
+            // not merged with its neighbours into one wider load.
+            unsafe { std::ptr::read_volatile(x) }
+        }
+        Ray {
+            org: Vec3::new(one(&self.org.x), one(&self.org.y), one(&self.org.z)),
+            dir: Vec3::new(one(&self.dir.x), one(&self.dir.y), one(&self.dir.z)),
+            t_min: one(&self.t_min),
+            t_max: one(&self.t_max),
+        }
+    }
+}
+
+impl Ray {
     pub fn new(org: Vec3, dir: Vec3) -> Ray {
         Ray { org, dir, t_min: 0.0, t_max: f32::INFINITY }
     }

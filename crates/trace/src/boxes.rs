@@ -86,7 +86,13 @@ impl RayBox {
     /// `movmskps` of the direction's sign bits.
     #[inline(always)]
     pub(crate) fn octant(r: &Ray) -> usize {
-        Vec3A::from(r.dir).is_negative_bitmask() as usize & 7
+        RayBox::octant_of(r.dir)
+    }
+
+    /// [`RayBox::octant`] of direction `d`.
+    #[inline(always)]
+    pub(crate) fn octant_of(d: glam::Vec3) -> usize {
+        Vec3A::from(d).is_negative_bitmask() as usize & 7
     }
 
     /// [`RayBox::rows`] of rays in octant `oct`: the near plane of an axis is its high one

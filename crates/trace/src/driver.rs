@@ -454,7 +454,7 @@ impl<'s> Tracer<'s> {
         // a kernel's set-up.
         if streak.skip_bounds > 0 {
             streak.skip_bounds -= 1;
-        } else if self.misses_bounds(ray) {
+        } else if self.misses_bounds(&ray.settled()) {
             return None;
         } else {
             streak.skip_bounds = SKIP_BOUNDS;
@@ -462,7 +462,9 @@ impl<'s> Tracer<'s> {
         if !AVX {
             return Some(GENERIC);
         }
-        let oct = RayBox::octant(ray);
+        // From the direction's three sign bits, read one by one (`Ray::settled`), as the
+        // kernel reads the ray after.
+        let oct = RayBox::octant_of(ray.settled().dir);
         Some(match self.octant_kernels {
             Some(true) => oct,
             Some(false) => GENERIC,
@@ -489,6 +491,9 @@ impl<'s> Tracer<'s> {
         scratch: &mut Scratch,
         ray: &Ray,
     ) -> Option<Found> {
+        // The ray read field by field (`Ray::settled`): one written just before the call is
+        // taken from the pending stores, where the kernel's vector loads would wait for them.
+        let ray = &ray.settled();
         let mut w = Walk::new(scratch, self.root, ray.t_max);
         // (Its scene-box test was [`Tracer::first_kernel`]'s.)
         w.fresh = false;
