@@ -246,10 +246,16 @@
     mov qword ptr [rsp + MRK_F_SAVED], rax
     # The ray's constants (`RayBox::new`): 1 / d with components of nearly zero made +-1e-20,
     # -1/d, -FAR_EPS/d, the plane rows of its octant.
-    vmovups xmm0, xmmword ptr [rsi]                 # ox oy oz dx
-    vmovups xmm1, xmmword ptr [rsi + 12]            # dx dy dz t_min
-    vshufps xmm0, xmm0, xmm0, 0xa4                  # ox oy oz oz
-    vshufps xmm1, xmm1, xmm1, 0xa4                  # dx dy dz dz
+    # Read field by field (`Ray::settled`): a ray written just before the call is taken from
+    # the pending stores, where a 16-byte load spanning them would wait for the cache.
+    vmovss xmm0, dword ptr [rsi]                    # ox
+    vinsertps xmm0, xmm0, dword ptr [rsi + 4], 0x10
+    vinsertps xmm0, xmm0, dword ptr [rsi + 8], 0x20
+    vinsertps xmm0, xmm0, dword ptr [rsi + 8], 0x30 # ox oy oz oz
+    vmovss xmm1, dword ptr [rsi + 12]               # dx
+    vinsertps xmm1, xmm1, dword ptr [rsi + 16], 0x10
+    vinsertps xmm1, xmm1, dword ptr [rsi + 20], 0x20
+    vinsertps xmm1, xmm1, dword ptr [rsi + 20], 0x30 # dx dy dz dz
     vandps xmm2, xmm1, xmmword ptr [rip + .Lmrk_abs]
     vmaxps xmm3, xmm2, xmmword ptr [rip + .Lmrk_tiny]
     vandps xmm4, xmm1, xmmword ptr [rip + .Lmrk_sign]
