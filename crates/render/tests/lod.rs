@@ -4,7 +4,7 @@
 
 mod common;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use common::*;
 use megaray_base::Vec3;
@@ -57,15 +57,21 @@ fn stand_ins_do_not_shadow_themselves() {
     assert_eq!(dark, 0, "{dark} pixels of stand-in surface shadow themselves");
 }
 
+/// Generated plant `spec` built into `dir` with levels of detail, and a 160x120 view of it.
+fn plant(dir: &Path, spec: &str) -> (PathBuf, Scene, Camera) {
+    let ply = dir.join("plant.ply");
+    megaray_gen::write_ply(&spec.parse().unwrap(), &ply, &megaray_base::NoProgress).unwrap();
+    let path = build_file(dir, &ply, "plant");
+    let scene = Scene::open(&path).unwrap();
+    let cam = Camera::framing(&scene.header().bounds, Vec3::new(0.1, 0.3, 0.45), 160, 120);
+    (path, scene, cam)
+}
+
 #[test]
 fn the_budget_steers_the_error() {
     let dir = tempfile::tempdir().unwrap();
-    let ply = dir.path().join("plant.ply");
-    megaray_gen::write_ply(&"plant:200k".parse().unwrap(), &ply, &megaray_base::NoProgress).unwrap();
-    let path = build_file(dir.path(), &ply, "plant");
-    let scene = Scene::open(&path).unwrap();
+    let (path, scene, cam) = plant(dir.path(), "plant:200k");
     let b = scene.header().bounds;
-    let cam = Camera::framing(&b, Vec3::new(0.1, 0.3, 0.45), 160, 120);
     let mut s = RenderSettings::new(cam);
     s.stand_in = true;
     let r = Renderer::new(s, &b);
@@ -92,12 +98,8 @@ fn the_budget_steers_the_error() {
 #[test]
 fn of_two_governors_over_one_pager_the_newer_steers() {
     let dir = tempfile::tempdir().unwrap();
-    let ply = dir.path().join("plant.ply");
-    megaray_gen::write_ply(&"plant:100k".parse().unwrap(), &ply, &megaray_base::NoProgress).unwrap();
-    let path = build_file(dir.path(), &ply, "plant");
-    let scene = Scene::open(&path).unwrap();
-    let b = scene.header().bounds;
-    let r = Renderer::new(RenderSettings::new(Camera::framing(&b, Vec3::new(0.1, 0.3, 0.45), 160, 120)), &b);
+    let (path, scene, cam) = plant(dir.path(), "plant:100k");
+    let r = Renderer::new(RenderSettings::new(cam), &scene.header().bounds);
     let pager =
         Pager::open(&path, PagerOptions { budget: Pager::min_budget(&scene) + 64 * 1024, fetchers: 2 }).unwrap();
     let tracer = Tracer::paged(&pager).with_lod_error(1.0);

@@ -464,7 +464,7 @@ impl<'s> Tracer<'s> {
         }
         // From the direction's three sign bits, read one by one (`Ray::settled`), as the
         // kernel reads the ray after.
-        let oct = RayBox::octant_of(ray.settled().dir);
+        let oct = RayBox::octant_of(ray.settled_dir());
         Some(match self.octant_kernels {
             Some(true) => oct,
             Some(false) => GENERIC,
