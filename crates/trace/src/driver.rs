@@ -119,6 +119,15 @@ impl<'s> Tracer<'s> {
         STACK.with_borrow_mut(|stack| packet::intersect16(self, rays, hits, self.isa, stack));
     }
 
+    /// The hit an [`Tracer::occluded`] query of an unpaged tracer stops at, by the same way
+    /// into the kernels (the new-ray and assembly kernels): every kernel visits a node's
+    /// children in the same order, so all stop at the same hit. For the tests.
+    #[doc(hidden)]
+    pub fn any_hit(&self, ray: &Ray) -> Option<Hit> {
+        assert!(self.pager.is_none() && self.layer.is_none(), "any_hit is for unpaged tracers");
+        self.hit_of(self.unpaged::<true>(ray))
+    }
+
     /// [`Tracer::intersect`] (or, `any`, [`Tracer::occluded`]) of an unpaged tracer with
     /// `pad` empty entries under the root on the traversal stack, enough of them to fill it
     /// at the first node: the hits must be those of the unpadded query. For the tests of the

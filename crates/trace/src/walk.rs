@@ -47,8 +47,9 @@ impl<'s> Tracer<'s> {
     }
 
     /// The hot loop of the single-ray kernel. Near-first: of the children a node's box test
-    /// hits, the nearest is visited next, the others are pushed far to near (unsorted for
-    /// `ANY`). Leaves are children like any other, so they too are tested nearest first.
+    /// hits, the nearest is visited next, the others are pushed far to near (for `ANY`, in slot
+    /// order from the far side of the splits, [`FAR_HIGH`]). Leaves are children like any
+    /// other, so they too are tested nearest first.
     ///
     /// It calls no function (all it uses is inlined, bounds checks aside, which never
     /// return): a call would clobber every vector register, and the compiler would then keep
@@ -89,6 +90,8 @@ impl<'s> Tracer<'s> {
             _ => RayTri4::with_inv(ray, &rb.inv),
         };
         let shared = rb.splats::<AVX>(t_min);
+        // An any-hit walk's order of a node's children: a constant in an octant's kernel.
+        let far_high = FAR_HIGH[if OCT < 8 { OCT } else { RayBox::octant(ray) }];
         // With `ALL` no tile is kept: [`TOP`] throughout, a constant (no register for it).
         let mut c = if ALL { TOP } else { w.c };
         let mut sp = w.sp;
@@ -226,14 +229,17 @@ impl<'s> Tracer<'s> {
                     sp += 1;
                 };
                 if ANY {
-                    // Any hit ends the ray, so order matters less than the cost of sorting:
-                    // the first child next, the others pushed as they come.
-                    let mut m = m1;
+                    // Any hit ends the ray, so no sorting by distance; but the far side of
+                    // the node's splits first ([`FAR_HIGH`]): slots from the last down (the
+                    // last next, the others pushed from the first up), or from the first up.
+                    let first = if far_high { 31 - mask.leading_zeros() } else { k0 };
+                    let mut m = mask & !(1 << first);
                     while m != 0 {
-                        push(at(m.trailing_zeros()));
-                        m &= m - 1;
+                        let k = if far_high { m.trailing_zeros() } else { 31 - m.leading_zeros() };
+                        push(at(k));
+                        m &= !(1 << k);
                     }
-                    r = node.child[k0 as usize];
+                    r = node.child[first as usize];
                     continue;
                 }
                 let (a, b) = (at(k0), at(m1.trailing_zeros()));
@@ -274,6 +280,23 @@ impl<'s> Tracer<'s> {
         event
     }
 }
+
+/// Per octant of a ray's direction, whether an any-hit walk visits a node's children from its
+/// last slot to its first (else first to last; every kernel alike, the assembly one too).
+/// Slots hold a binary tree's subtrees in order, the lower side of each split first, so for a
+/// ray going up along most axes (at most one negative component) the far side of most splits
+/// lies in the higher slots. Far side first, because an any-hit ray mostly starts on a
+/// surface and leaves it: what blocks it seldom lies next to its origin, where the near
+/// children are (docs/PERF.md, "Any-hit order").
+pub(crate) const FAR_HIGH: [bool; 8] = {
+    let mut t = [false; 8];
+    let mut oct = 0;
+    while oct < 8 {
+        t[oct] = (oct as u32).count_ones() <= 1;
+        oct += 1;
+    }
+    t
+};
 
 /// [`Tracer::walk`] compiled for AVX2 (one [`Kernel`]): a function of its own, never inlined,
 /// so that its registers are allocated for the loop alone. Free (not a method), so that it

@@ -41,6 +41,7 @@
 .set MRK_F_UNIT, 432        # the leaf's next block (offset / 16)
 .set MRK_F_LEFT, 440        # its triangles from there
 .set MRK_F_SAVED, 448      # rsp before the frame was aligned
+.set MRK_F_HIGH, 456        # an any-hit walk's order: 1 from the last slot down (`FAR_HIGH`)
 .set MRK_F_ORG, 464         # the origin, -1/d and -FAR_EPS/d (four lanes each, for MRK_RELOAD)
 .set MRK_F_NINV, 480
 .set MRK_F_NINVF, 496
@@ -269,6 +270,12 @@
     vmovaps xmmword ptr [rsp + MRK_F_NINVF], xmm7
     mov r14, qword ptr [rdi + {pool}]
     vmovmskps eax, xmm1                             # the octant's bits
+    mov ecx, eax                                    # `FAR_HIGH`: at most one negative
+    and ecx, 7                                      #   (bit 3 is z's again)
+    popcnt ecx, ecx
+    cmp ecx, 1
+    setbe cl
+    mov byte ptr [rsp + MRK_F_HIGH], cl
     mov ecx, eax
     and ecx, 1
     shl ecx, 5
@@ -433,7 +440,28 @@
     cmp rsi, qword ptr [rsp + MRK_F_LIMIT]
     ja .Lfull_\any
 .if \any
-    # Any hit ends the ray: the first child next, the others pushed as they come.
+    # Any hit ends the ray: no sorting by distance, but the far side of the node's splits
+    # first (`FAR_HIGH`, as `Tracer::walk`).
+    cmp byte ptr [rsp + MRK_F_HIGH], 0
+    jne .Lanyhigh_\any
+    # From the first slot up: the first child next, the others pushed from the last down.
+.Lanylow_\any:
+    bsr ebp, ecx
+    btr ecx, ebp
+    mov r15, qword ptr [rdx + 8 * rbp]
+    mov qword ptr [rsi], r15
+    mov dword ptr [rsi + 8], -1
+    add rsi, 16
+    MRK_PREFETCH r15, rax, rbp
+    test ecx, ecx
+    jnz .Lanylow_\any
+    mov rax, qword ptr [rdx + 8 * rbx]
+    jmp .Ldescend_\any
+.Lanyhigh_\any:
+    # From the last slot down: the last child next, the others pushed from the first up.
+    bts ecx, ebx
+    bsr ebx, ecx
+    btr ecx, ebx
 .Lanyloop_\any:
     tzcnt ebp, ecx
     blsr ecx, ecx

@@ -306,6 +306,10 @@ fn single_ray_kernels_agree_across_isas() {
         let got_any: Vec<_> = rays.par_iter().map(|r| any_hit(&tracer, r)).collect();
         let bad = (0..rays.len()).filter(|&i| got_any[i] != want_any[i]).count();
         assert_eq!(bad, 0, "{isa}: {bad} of {} any-hit hits differ from the baseline kernel's", rays.len());
+        // The same by the way `occluded` goes (new-ray kernels, the assembly one).
+        let got_any: Vec<_> = rays.par_iter().map(|r| key(tracer.any_hit(r))).collect();
+        let bad = (0..rays.len()).filter(|&i| got_any[i] != want_any[i]).count();
+        assert_eq!(bad, 0, "{isa}: {bad} of {} new rays' any-hit hits differ from the baseline's", rays.len());
         // The same with the stack full at the first node, so that entries spill to the heap
         // and come back (as a tree deeper than the fixed stack would make them).
         for pad in [60, 300] {
