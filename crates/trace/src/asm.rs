@@ -1,4 +1,5 @@
-//! The single-ray kernel of AVX2 machines, written in assembly (`walk_avx2.s`).
+//! The single-ray kernel for incoherent rays, written in assembly (`walk_avx2.s`) with AVX2
+//! instructions: it serves AVX2 and AVX-512 machines alike.
 //!
 //! It walks a new ray through a tracer whose every tile is checked, exactly as
 //! [`Tracer::walk`] does (the same box and triangle tests, operation for operation, the same

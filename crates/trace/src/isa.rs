@@ -155,11 +155,12 @@ macro_rules! kernel_row {
 pub(crate) const KERNELS: usize = GENERIC + 1;
 
 impl<'s> Tracer<'s> {
-    /// Whether new rays run the assembly kernel: asked for (`k.asm`), on AVX2, where every
-    /// tile is checked (`all`).
+    /// Whether new rays run the assembly kernel: asked for (`k.asm`), on AVX2 or AVX-512 (its
+    /// instructions are AVX2's; for incoherent rays it is faster than the compiled AVX-512
+    /// kernel too: docs/PERF.md, "The assembly kernel"), where every tile is checked (`all`).
     pub(crate) fn asm_kernel(k: &Kernels, all: bool) -> bool {
         #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
-        if k.asm && all && k.isa == Isa::Avx2 && !cfg!(feature = "stats") {
+        if k.asm && all && matches!(k.isa, Isa::Avx2 | Isa::Avx512) && !cfg!(feature = "stats") {
             return crate::asm::supported();
         }
         let _ = (k, all);

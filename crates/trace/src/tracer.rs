@@ -107,8 +107,8 @@ pub struct Tracer<'s> {
     /// [`Tracer::intersect`] and [`Tracer::occluded`] run. `None` on the baseline instruction
     /// set and where tiles are checked as the walk goes.
     pub(crate) new_ray: Option<[[NewRay; KERNELS]; 2]>,
-    /// New rays run the assembly kernel (`asm.rs`): on AVX2 machines where every tile is
-    /// checked (and not in a `stats` build, whose counters it does not keep).
+    /// New rays run the assembly kernel (`asm.rs`): on AVX2 and AVX-512 machines where every
+    /// tile is checked (and not in a `stats` build, whose counters it does not keep).
     pub(crate) asm: bool,
     /// How many stack entries the assembly kernel may have below a node whose children it
     /// pushes ([`Kernels::asm_stack`]).

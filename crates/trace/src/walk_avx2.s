@@ -1,4 +1,4 @@
-# The single-ray kernel for AVX2 machines, written by hand (see asm.rs for why and for the
+# The single-ray kernel for incoherent rays (AVX2 and AVX-512 machines), written by hand (see asm.rs for why and for the
 # layout of the `AsmRay` it reads and writes). Two functions, one per query kind, made by the
 # macro `MRK_WALK`: `megaray_walk_closest` and `megaray_walk_any`, called with the AsmRay in
 # rdi and the `Ray` in rsi. Each makes the ray's constants as `RayBox::new` and
