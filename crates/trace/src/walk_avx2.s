@@ -1,11 +1,11 @@
-# The single-ray kernel for incoherent rays (AVX2 and AVX-512 machines), written by hand (see asm.rs for why and for the
-# layout of the `AsmRay` it reads and writes). Two functions, one per query kind, made by the
-# macro `MRK_WALK`: `megaray_walk_closest` and `megaray_walk_any`, called with the AsmRay in
-# rdi and the `Ray` in rsi. Each makes the ray's constants as `RayBox::new` and
-# `RayTri4::with_axis_avx` make them (the same operations), then does for the new ray on a
-# tracer whose every tile is checked what `Tracer::walk` does (the same operations in the
-# same order, so the same hits bit for bit: tests compare them), and returns an event code:
-# 0 the stack ran empty (the ray is done), 1 an any-hit query found a hit, 2 an edge lies
+# The single-ray kernel for incoherent rays (AVX2 and AVX-512 machines), written by hand (see
+# asm.rs for why and for the layout of the `AsmRay` it reads and writes). Two functions, one
+# per query kind, made by the macro `MRK_WALK`: `megaray_walk_closest` and `megaray_walk_any`,
+# called with the AsmRay in rdi and the `Ray` in rsi. Each makes the ray's constants as
+# `RayBox::new` and `RayTri4::with_axis_avx` make them (the same operations), then does for the
+# new ray on a tracer whose every tile is checked what `Tracer::walk` does (the same operations
+# in the same order, so the same hits bit for bit: tests compare them), and returns an event
+# code: 0 the stack ran empty (the ray is done), 1 an any-hit query found a hit, 2 an edge lies
 # exactly on the ray (`Event::Exact`), 3 the fixed stack is full (`Event::Full`).
 #
 # Registers, after the set-up:
