@@ -62,6 +62,17 @@
     vbroadcastss ymm10, dword ptr [rdi + {t_wide}]
 .endm
 
+# An any-hit walk's push of the node's child in slot rbp (its references at rdx): the
+# reference, the tile `TOP` (-1), no entry distance (an any-hit walk reads none), and the
+# child asked for (`MRK_PREFETCH`). Clobbers r15, rax and rbp.
+.macro MRK_PUSH_ANY
+    mov r15, qword ptr [rdx + 8 * rbp]
+    mov qword ptr [rsi], r15
+    mov dword ptr [rsi + 8], -1
+    add rsi, 16
+    MRK_PREFETCH r15, rax, rbp
+.endm
+
 # `Tracer::prefetch` of reference `r`, a child just pushed: a node's four lines, or a leaf's
 # first 256 bytes and, when it has more than four triangles, the rest of its second block
 # (what `Tracer::prefetch` asks for, but without branches: the kind of a child pushed is as
@@ -448,11 +459,7 @@
 .Lanylow_\any:
     bsr ebp, ecx
     btr ecx, ebp
-    mov r15, qword ptr [rdx + 8 * rbp]
-    mov qword ptr [rsi], r15
-    mov dword ptr [rsi + 8], -1
-    add rsi, 16
-    MRK_PREFETCH r15, rax, rbp
+    MRK_PUSH_ANY
     test ecx, ecx
     jnz .Lanylow_\any
     mov rax, qword ptr [rdx + 8 * rbx]
@@ -465,11 +472,7 @@
 .Lanyloop_\any:
     tzcnt ebp, ecx
     blsr ecx, ecx
-    mov r15, qword ptr [rdx + 8 * rbp]
-    mov qword ptr [rsi], r15
-    mov dword ptr [rsi + 8], -1
-    add rsi, 16
-    MRK_PREFETCH r15, rax, rbp
+    MRK_PUSH_ANY
     test ecx, ecx
     jnz .Lanyloop_\any
     mov rax, qword ptr [rdx + 8 * rbx]
