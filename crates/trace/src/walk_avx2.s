@@ -41,7 +41,7 @@
 .set MRK_F_UNIT, 432        # the leaf's next block (offset / 16)
 .set MRK_F_LEFT, 440        # its triangles from there
 .set MRK_F_SAVED, 448      # rsp before the frame was aligned
-.set MRK_F_HIGH, 456        # an any-hit walk's order: 1 from the last slot down (`FAR_HIGH`)
+.set MRK_F_HIGH, 456        # an any-hit walk's order: 1 from the last slot down (`FAR_HIGH`; any-hit only)
 .set MRK_F_ORG, 464         # the origin, -1/d and -FAR_EPS/d (four lanes each, for MRK_RELOAD)
 .set MRK_F_NINV, 480
 .set MRK_F_NINVF, 496
@@ -281,12 +281,15 @@
     vmovaps xmmword ptr [rsp + MRK_F_NINVF], xmm7
     mov r14, qword ptr [rdi + {pool}]
     vmovmskps eax, xmm1                             # the octant's bits
-    mov ecx, eax                                    # `FAR_HIGH`: at most one negative
-    and ecx, 7                                      #   (bit 3 is z's again)
+.if \any
+    # `FAR_HIGH` (read by any-hit walks only): at most one negative (bit 3 is z's again).
+    mov ecx, eax
+    and ecx, 7
     popcnt ecx, ecx
     cmp ecx, 1
     setbe cl
     mov byte ptr [rsp + MRK_F_HIGH], cl
+.endif
     mov ecx, eax
     and ecx, 1
     shl ecx, 5
