@@ -9,6 +9,11 @@
 //!   file.)
 //! - **SIGXFSZ**: a write past the file-size limit (`ulimit -f`). Ignored, so the write
 //!   fails with `EFBIG` and the writer's error path (one line, temporary removed) runs.
+//! - **SIGPIPE**: Rust ignores it, so a command whose reader went away (`megaray info X |
+//!   head -3`) got `EPIPE` from its next `println!`, which panics. Commands that print for
+//!   other programs take the default action again ([`end_quietly_on_closed_pipe`]): they end
+//!   silently, as `cat` does. Not the server, the viewer nor MPI ranks, whose sockets must
+//!   see `EPIPE` as an error instead.
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -22,6 +27,15 @@ pub fn ignore_file_size_signal() {
     // SAFETY: setting a signal's disposition to SIG_IGN has no preconditions.
     unsafe {
         libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+    }
+}
+
+/// A closed standard output (or any pipe) ends the process silently, as it ends `cat`
+/// (see the module documentation).
+pub fn end_quietly_on_closed_pipe() {
+    // SAFETY: setting a signal's disposition to SIG_DFL has no preconditions.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

@@ -170,6 +170,10 @@ fn main() {
     // Under mpirun only rank 0 shows progress.
     let rank = cluster::launched_rank();
     let bars = progress::Bars::new(cli.quiet || rank.is_some_and(|r| r > 0));
+    // Output piped into `head` and the like: end quietly when it closes (not with sockets).
+    if rank.is_none() && !matches!(cli.cmd, Command::View(_) | Command::Serve(_)) {
+        fault::end_quietly_on_closed_pipe();
+    }
     if let Err(e) = kernels_from_env().and_then(megaray_trace::Kernels::configure) {
         eprintln!("megaray: error: {e}");
         std::process::exit(1);

@@ -189,3 +189,24 @@ fn odd_faces_are_skipped_with_counted_notes() {
     assert!(notes.iter().any(|n| n.contains("odd.obj: skipped 2 faces with fewer than 3 vertices")), "{err}");
     assert!(notes.iter().any(|n| n.contains("odd.obj: skipped 1 degenerate (zero-area) triangles")), "{err}");
 }
+
+/// Output read by a program that stops early (`megaray info X | head -1`): the command ends
+/// quietly, as `cat` does, instead of panicking on the closed pipe.
+#[test]
+fn a_closed_output_pipe_ends_the_command_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("bunny.mray");
+    let (code, _, err) =
+        run(&["build", model("stanford-bunny.obj").to_str().unwrap(), "-o", out.to_str().unwrap(), "-q"]);
+    assert_eq!(code, 0, "{err}");
+    for args in [vec!["info", out.to_str().unwrap()], vec!["info", out.to_str().unwrap(), "--json"]] {
+        let mut child = Command::new(bin()).args(&args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+        // The reader goes away before the first line is written.
+        drop(child.stdout.take());
+        let done = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&done.stderr);
+        assert!(!err.contains("panicked") && err.trim().is_empty(), "{args:?}: {err}");
+        assert!(done.status.success() || done.status.signal() == Some(libc::SIGPIPE), "{args:?}: {:?}", done.status);
+    }
+}
