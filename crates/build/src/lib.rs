@@ -54,7 +54,7 @@ pub use crate::bvh::Quality;
 use crate::bvh::{build_bvh, build_bvh_of, BvhConfig, Kid};
 pub use crate::objects::{pbrt_input, InstancePlan, ObjectInput, ObjectSource, SceneInput};
 pub use crate::space::check_space;
-use crate::stream::{StreamFile, StreamReader, StreamTri};
+use crate::stream::{StreamFile, StreamReader};
 
 /// The most triangles a leaf holds: two blocks of four, when the SAH finds that cheaper than
 /// a split (a traversal step and the blocks of both sides, weighted by area). Such leaves
@@ -555,7 +555,11 @@ pub fn recycle_part(blob: PartBlob) {
 pub fn release_spare() {
     bvh::release_spare();
     tiles::release_spare();
+    SPARE_TRIS.clear();
 }
+
+/// A part's triangles as loaded from its stream ([`build_part`]), kept from part to part.
+static SPARE_TRIS: bvh::spare::Spare<[[f32; 3]; 3]> = bvh::spare::Spare::new(8);
 
 /// Loads one part's stream, builds its tree, cuts it into tiles and gathers its attributes;
 /// then its levels of detail ([`lod`]), each with its error and its own tree and tiles
@@ -568,26 +572,19 @@ fn build_part(
     parallel: bool,
     io: &split::IoCount,
 ) -> Result<Built, BuildError> {
-    let mut recs = vec![StreamTri { v: [[0.0; 3]; 3], reserved: 0, id: 0 }; s.count as usize];
-    let mut r = StreamReader::open(s)?;
-    let mut at = 0;
-    while at < recs.len() {
-        let n = r.read(&mut recs[at..])?;
-        if n == 0 {
-            break;
-        }
-        at += n;
-    }
+    // The corners into an array kept from the part before (fresh memory costs a page fault
+    // per 4 KiB); ids only when the stream has them (attributes or components need them).
+    let mut tris = SPARE_TRIS.take();
+    let mut ids = Vec::new();
+    StreamReader::open(s)?.read_all(&mut tris, &mut ids)?;
     io.read.fetch_add(s.bytes(), Ordering::Relaxed);
-    let ids: Vec<u64> = recs.iter().map(|t| t.id).collect();
-    let tris: Vec<[[f32; 3]; 3]> = recs.iter().map(|t| t.v).collect();
-    drop(recs);
+    let id_of = |i: u32| ids.get(i as usize).copied().unwrap_or(0);
     // With components, each leaf's triangles by component (fewer runs of slots).
     let keys: Option<Vec<u32>> = components.several().then(|| ids.iter().map(|&id| components.of(id)).collect());
     let (mut blob, tri_source) = build_in_core_keyed(&tris, keys.as_deref(), opts.tile_target, parallel, opts.quality);
     let levels = opts.lod.map(|l| lod::levels(&tris, &l)).unwrap_or_default();
-    drop(tris);
-    let slot_ids = per_slot(&tri_source, |i| ids[i as usize]);
+    SPARE_TRIS.give(tris);
+    let slot_ids = per_slot(&tri_source, id_of);
     blob.normals = attrs.gather::<PackedNormals>(attrs::NORMAL, &slot_ids)?;
     blob.uvs = attrs.gather::<[[f32; 2]; 3]>(attrs::UV, &slot_ids)?;
     blob.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &slot_ids)?;
@@ -596,7 +593,7 @@ fn build_part(
     let mut lods = Vec::with_capacity(levels.len());
     for level in levels {
         let (mut lb, src) = build_in_core(&level.tris, opts.tile_target, parallel, opts.quality);
-        let slot_ids = per_slot(&src, |i| ids[level.source[i as usize] as usize]);
+        let slot_ids = per_slot(&src, |i| id_of(level.source[i as usize]));
         lb.colors = attrs.gather::<[[u8; 4]; 3]>(attrs::COLOR, &slot_ids)?;
         lb.materials = attrs.gather::<u32>(attrs::MATERIAL, &slot_ids)?;
         lb.components = component_runs(&src, &slot_ids, components);

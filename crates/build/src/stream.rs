@@ -280,6 +280,37 @@ impl StreamReader {
         Ok(n)
     }
 
+    /// Reads the rest of the stream: its triangles' corners onto `tris` and, unless the
+    /// stream has no ids ([`Ids::Absent`]), their ids onto `ids`. A 36-byte stream is read
+    /// straight into `tris` (no record copies); a 48-byte one through a small buffer. This is
+    /// how a part is loaded whole (its peak then 36 bytes a triangle, 44 with ids, where
+    /// records and a buffer of the whole stream took 128).
+    pub fn read_all(&mut self, tris: &mut Vec<[[f32; 3]; 3]>, ids: &mut Vec<u64>) -> Result<(), BuildError> {
+        let n = self.left as usize;
+        tris.reserve(n);
+        if self.ids == Ids::Stored {
+            ids.reserve(n);
+            let mut buf = vec![StreamTri::zeroed(); n.min(1 << 16)];
+            while self.left > 0 {
+                let got = self.read(&mut buf)?;
+                tris.extend(buf[..got].iter().map(|t| t.v));
+                ids.extend(buf[..got].iter().map(|t| t.id));
+            }
+            return Ok(());
+        }
+        let start = tris.len();
+        tris.resize(start + n, [[0.0; 3]; 3]);
+        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut tris[start..]);
+        self.inp.read_exact(bytes).map_err(|e| BuildError::io(&self.path, "read", e))?;
+        if let Ids::Implicit(base) = self.ids {
+            ids.extend((0..n as u64).map(|k| base + self.index + k));
+        }
+        self.left = 0;
+        self.index += n as u64;
+        self.consumed += bytes.len() as u64;
+        Ok(())
+    }
+
     /// On a stream opened with [`StreamReader::open_consuming`], gives back the blocks of
     /// what has been read, once at least [`RELEASE_STEP`] bytes have gathered; returns
     /// whether it did. A file system that cannot punch holes keeps them (the build then
