@@ -371,29 +371,17 @@ pub fn build_objects(
     let single = parts.len() == 1;
     let (attrs, components) = (&attrs, &components);
     // Parts are taken in order by whichever thread is free and written in order, so the file
-    // is the same bytes whatever the threads' timing. A thread whose part is built ahead of
-    // its turn holds it (no more memory than while building it) and, while it waits, runs
-    // the pending tasks of the parts still building (each part's tree is built with rayon
-    // tasks when there are several threads), so the waiting costs little.
+    // is the same bytes whatever the threads' timing. A part built ahead of its turn is left
+    // for the thread whose turn comes first to write (one such part at a time: docs/PERF.md,
+    // "Parts in turn"), and its thread builds the next; with one already left, it waits,
+    // running the pending tasks of the parts still building (a part's tree and its levels
+    // of detail are rayon tasks when there are several threads).
     let next = AtomicUsize::new(0);
     let turn = InOrder::default();
     let parallel = single || opts.threads > 1;
-    let built: Vec<Result<(), BuildError>> = pool.broadcast(|_| loop {
-        let i = next.fetch_add(1, Ordering::Relaxed);
-        if i >= parts.len() || turn.failed() {
-            return Ok(());
-        }
-        let p = &parts[i];
-        let (blob, lods) = match check_cancel(opts).and_then(|_| build_part(p, attrs, components, opts, parallel, &io))
-        {
-            Ok(b) => b,
-            Err(e) => return Err(turn.fail(e)),
-        };
-        if !turn.wait_for(i) {
-            return Ok(());
-        }
+    let write = |i: usize, (blob, lods): Built| -> Result<(), BuildError> {
         let n = blob.tri_count;
-        let wrote = (|| {
+        {
             let mut w = writer.lock().unwrap_or_else(|e| e.into_inner());
             w.append_part(i as u32, &blob)?;
             for (k, (error, lod)) in lods.into_iter().enumerate() {
@@ -401,15 +389,21 @@ pub fn build_objects(
                 lod_count.fetch_add(1, Ordering::Relaxed);
                 recycle_part(lod);
             }
-            Ok::<(), BuildError>(())
-        })();
-        if let Err(e) = wrote {
-            return Err(turn.fail(e));
         }
-        turn.done(i);
         recycle_part(blob);
-        let _ = std::fs::remove_file(&p.path);
+        let _ = std::fs::remove_file(&parts[i].path);
         progress.inc(n);
+        Ok(())
+    };
+    let built: Vec<Result<(), BuildError>> = pool.broadcast(|_| loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        if i >= parts.len() || turn.failed() {
+            return Ok(());
+        }
+        match check_cancel(opts).and_then(|_| build_part(&parts[i], attrs, components, opts, parallel, &io)) {
+            Ok(b) => turn.hand_over(i, b, &write)?,
+            Err(e) => return Err(turn.fail(e)),
+        }
     });
     // The arrays kept from part to part are not kept past the build.
     release_spare();
@@ -452,42 +446,81 @@ pub fn build_objects(
 type Built = (PartBlob, Vec<(f32, PartBlob)>);
 
 /// Whose turn it is to write, for threads that build parts out of order and write them in
-/// order. A failure ends every wait.
+/// order; one part built ahead of its turn may be left here for another thread to write. A
+/// failure ends every wait.
 #[derive(Default)]
 struct InOrder {
-    /// The next part to write, and whether a part failed.
-    state: Mutex<(usize, bool)>,
+    state: Mutex<Turns>,
+}
+
+#[derive(Default)]
+struct Turns {
+    /// The next part to write.
+    next: usize,
+    failed: bool,
+    /// A part built ahead of its turn, left to be written.
+    ready: Option<(usize, Built)>,
 }
 
 impl InOrder {
-    /// Waits, running the pool's pending tasks meanwhile, until part `i` may be written;
-    /// false once any part failed.
-    fn wait_for(&self, i: usize) -> bool {
+    /// Part `i` is built: written now by `write` if its turn has come (and then the part left
+    /// ready for the turn after, if any); else left ready when no other part is, and the call
+    /// returns at once; else the call waits for the turn, running the pool's pending tasks
+    /// meanwhile. Nothing is written once any part failed.
+    fn hand_over(
+        &self,
+        i: usize,
+        built: Built,
+        write: &impl Fn(usize, Built) -> Result<(), BuildError>,
+    ) -> Result<(), BuildError> {
+        let mine = (i, built);
         loop {
-            match *self.state.lock().unwrap_or_else(|e| e.into_inner()) {
-                (_, true) => return false,
-                (next, false) if next == i => return true,
-                _ => {}
+            let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+            if st.failed {
+                return Ok(());
             }
+            if st.next == mine.0 {
+                drop(st);
+                return self.write_from(mine, write);
+            }
+            if st.ready.is_none() {
+                st.ready = Some(mine);
+                return Ok(());
+            }
+            drop(st);
             if rayon::yield_now() != Some(rayon::Yield::Executed) {
                 std::thread::sleep(std::time::Duration::from_micros(100));
             }
         }
     }
 
-    /// Part `i` is written: the next may go.
-    fn done(&self, i: usize) {
-        self.state.lock().unwrap_or_else(|e| e.into_inner()).0 = i + 1;
+    /// Writes `first` (whose turn it is), then each part left ready for the turn after.
+    fn write_from(
+        &self,
+        first: (usize, Built),
+        write: &impl Fn(usize, Built) -> Result<(), BuildError>,
+    ) -> Result<(), BuildError> {
+        let mut cur = first;
+        loop {
+            let i = cur.0;
+            write(i, cur.1).map_err(|e| self.fail(e))?;
+            let mut st = self.state.lock().unwrap_or_else(|e| e.into_inner());
+            st.next = i + 1;
+            match st.ready.take_if(|r| r.0 == i + 1) {
+                Some(r) => cur = r,
+                None => return Ok(()),
+            }
+        }
     }
 
     /// Records a failure and gives `e` back.
     fn fail(&self, e: BuildError) -> BuildError {
-        self.state.lock().unwrap_or_else(|e| e.into_inner()).1 = true;
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).failed = true;
         e
     }
 
     fn failed(&self) -> bool {
-        self.state.lock().unwrap_or_else(|e| e.into_inner()).1
+        self.state.lock().unwrap_or_else(|e| e.into_inner()).failed
     }
 }
 
@@ -581,8 +614,12 @@ fn build_part(
     let id_of = |i: u32| ids.get(i as usize).copied().unwrap_or(0);
     // With components, each leaf's triangles by component (fewer runs of slots).
     let keys: Option<Vec<u32>> = components.several().then(|| ids.iter().map(|&id| components.of(id)).collect());
-    let (mut blob, tri_source) = build_in_core_keyed(&tris, keys.as_deref(), opts.tile_target, parallel, opts.quality);
-    let levels = opts.lod.map(|l| lod::levels(&tris, &l)).unwrap_or_default();
+    // The levels of detail (serial work) beside the tree (rayon tasks), so that a thread
+    // waiting for its turn to write can take them over.
+    let ((mut blob, tri_source), levels) = rayon::join(
+        || build_in_core_keyed(&tris, keys.as_deref(), opts.tile_target, parallel, opts.quality),
+        || opts.lod.map(|l| lod::levels(&tris, &l)).unwrap_or_default(),
+    );
     SPARE_TRIS.give(tris);
     let slot_ids = per_slot(&tri_source, id_of);
     blob.normals = attrs.gather::<PackedNormals>(attrs::NORMAL, &slot_ids)?;
@@ -677,6 +714,49 @@ pub fn build_in_core_keyed(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Parts handed over out of order by several threads (a part left ready, threads
+    /// waiting for their turn) are written once each, in order; after a failed write nothing
+    /// more is written and every hand-over returns.
+    #[test]
+    fn parts_are_written_in_order_whatever_order_they_are_built_in() {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(4).build().unwrap();
+        for round in 0..20u32 {
+            let n = 40;
+            let fail_at = (round % 4 == 3).then_some(17);
+            let turn = InOrder::default();
+            let written = Mutex::new(Vec::new());
+            let write = |i: usize, _: Built| {
+                written.lock().unwrap().push(i);
+                match fail_at {
+                    Some(f) if i == f => Err(BuildError::Invalid("a failed write".into())),
+                    _ => Ok(()),
+                }
+            };
+            let next = AtomicUsize::new(0);
+            let results: Vec<Result<(), BuildError>> = pool.broadcast(|_| loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                if i >= n || turn.failed() {
+                    return Ok(());
+                }
+                // Parts take uneven times, so later ones are often built first.
+                let us = megaray_base::hash32(i as u32 ^ round.wrapping_mul(0x9e37_79b9)) % 400;
+                std::thread::sleep(std::time::Duration::from_micros(us as u64));
+                turn.hand_over(i, (PartBlob::default(), Vec::new()), &write)?;
+            });
+            let written = written.into_inner().unwrap();
+            match fail_at {
+                None => {
+                    assert_eq!(written, (0..n).collect::<Vec<_>>(), "round {round}");
+                    assert!(results.iter().all(Result::is_ok));
+                }
+                Some(f) => {
+                    assert_eq!(written, (0..=f).collect::<Vec<_>>(), "round {round}");
+                    assert_eq!(results.iter().filter(|r| r.is_err()).count(), 1, "round {round}");
+                }
+            }
+        }
+    }
 
     /// A build into arrays kept from an earlier one ([`recycle_part`], [`bvh::recycle`])
     /// makes exactly the tiles and slots of a build into fresh ones, for a smaller model
