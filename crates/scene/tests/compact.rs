@@ -262,4 +262,33 @@ fn crafted_extent_tables_are_refused() {
     b[216..224].copy_from_slice(&((1u64 << 44) + 4096).to_le_bytes());
     seal(&mut b);
     refused(&b, "an image past 2^44 bytes");
+    // A few bytes of file claiming a large image (what a fuzzer's file made `Scene::open`
+    // allocate: 880 MiB from 12 KiB): an image past its last extent, a gap between two
+    // extents, a tile said to grow more than the codec can.
+    let mut b = good.clone();
+    b[216..224].copy_from_slice(&(h.image_bytes + (1 << 30)).to_le_bytes());
+    seal(&mut b);
+    refused(&b, "an image 1 GiB past its last extent");
+    let last = h.extent_count as usize - 1;
+    let mut b = good.clone();
+    let mut e = extent(&b, last);
+    e.image_off += 1 << 20;
+    b[at(last)..at(last) + 40].copy_from_slice(bytemuck::bytes_of(&e));
+    b[216..224].copy_from_slice(&(h.image_bytes + (1 << 20)).to_le_bytes());
+    seal(&mut b);
+    refused(&b, "a gap of 1 MiB before the last extent");
+    let mut b = good.clone();
+    let mut e = extent(&b, t0);
+    let grown = (e.stored_len * 256 + 16).next_multiple_of(16);
+    let shift = (grown - e.image_len).next_multiple_of(4096);
+    e.image_len = grown;
+    b[at(t0)..at(t0) + 40].copy_from_slice(bytemuck::bytes_of(&e));
+    for i in t0 + 1..=last {
+        let mut f = extent(&b, i);
+        f.image_off += shift;
+        b[at(i)..at(i) + 40].copy_from_slice(bytemuck::bytes_of(&f));
+    }
+    b[216..224].copy_from_slice(&(h.image_bytes + shift).to_le_bytes());
+    seal(&mut b);
+    refused(&b, "a tile said to grow more than 256 times");
 }

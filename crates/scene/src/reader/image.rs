@@ -13,14 +13,20 @@ use crate::reader::Scene;
 const MAX_IMAGE: u64 = 1 << 44;
 /// The longest tile a reader decodes (`megaray build --tile-size` is at most 64 MiB).
 const MAX_TILE: u64 = 1 << 30;
+/// The most a stored tile grows when decoded: a node is at least its one byte of used
+/// slots (256 bytes decoded), a block its one byte of lanes (144), after a 16-byte head.
+const MAX_GROWTH: u64 = 256;
 
 /// Reads and checks the extent table of the compact file `path` (`len` bytes): within the
 /// file, its checksum, an image of whole pages within what the format addresses; extents in
 /// image order inside the image, none overlapping, their stored forms in file order inside
 /// the file, none overlapping; tiles starting on a page, alone in their last page, at most
-/// [`MAX_TILE`] long and stored smaller; the first extent the header, stored where it lies.
-/// A file that passes makes every load read each stored byte at most once per tile and
-/// allocate at most a tile's bytes.
+/// [`MAX_TILE`] long, stored smaller and at most [`MAX_GROWTH`] times smaller; the first
+/// extent the header, stored where it lies; less than a page of padding between extents and
+/// after the last. A file that passes makes every load read each stored byte at most once
+/// per tile and allocate at most a tile's bytes, and its image is at most about 256 times
+/// the file (a few bytes of file cannot claim an image of gigabytes for `Scene::open` to
+/// allocate).
 pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Result<Vec<Extent>, SceneError> {
     let bad = |what: String| SceneError::corrupt(path, what);
     let bytes = h
@@ -53,6 +59,7 @@ pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Re
                         && e.image_len.is_multiple_of(16)
                         && e.image_len <= MAX_TILE
                         && e.stored_len < e.image_len
+                        && e.image_len <= e.stored_len.saturating_mul(MAX_GROWTH)
                 }
                 _ => false,
             };
@@ -66,6 +73,12 @@ pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Re
         {
             return Err(bad(format!("extent {i} is out of order, out of bounds or of an unknown kind")));
         }
+        if e.image_off - end >= PAGE {
+            return Err(bad(format!(
+                "extent {i} leaves {} bytes of the image before it uncovered (a writer pads less than a page)",
+                e.image_off - end
+            )));
+        }
         end = e.image_off + e.image_len;
         if e.kind == EXTENT_TILE {
             end = end.next_multiple_of(PAGE);
@@ -74,6 +87,12 @@ pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Re
     }
     if extents.is_empty() {
         return Err(bad("a compact file without extents".into()));
+    }
+    if h.image_bytes - end >= PAGE {
+        return Err(bad(format!(
+            "the image runs {} bytes past its last extent (a writer pads less than a page)",
+            h.image_bytes - end
+        )));
     }
     Ok(extents)
 }
