@@ -214,6 +214,7 @@ impl Scene {
             let extents = image::read_extents(path, &file, &header, len)?;
             if !owned {
                 image::check_fits(path, &header)?;
+                image::check_tail(path, &header, &extents)?;
             }
             let r = Region::new(file, header.image_bytes, extents, !owned).map_err(reserve)?;
             if owned {

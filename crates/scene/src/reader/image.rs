@@ -22,8 +22,8 @@ const MAX_GROWTH: u64 = 256;
 /// image order inside the image, none overlapping, their stored forms in file order inside
 /// the file, none overlapping; tiles starting on a page, alone in their last page, at most
 /// [`MAX_TILE`] long, stored smaller and at most [`MAX_GROWTH`] times smaller; the first
-/// extent the header, stored where it lies; less than a page of padding between extents and
-/// after the last. A file that passes makes every load read each stored byte at most once
+/// extent the header, stored where it lies; less than a page of padding between extents
+/// ([`check_tail`]: and after the last, for a file opened in core). A file that passes makes every load read each stored byte at most once
 /// per tile and allocate at most a tile's bytes, and its image is at most about 256 times
 /// the file (a few bytes of file cannot claim an image of gigabytes for `Scene::open` to
 /// allocate).
@@ -88,13 +88,32 @@ pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Re
     if extents.is_empty() {
         return Err(bad("a compact file without extents".into()));
     }
-    if h.image_bytes - end >= PAGE {
-        return Err(bad(format!(
-            "the image runs {} bytes past its last extent (a writer pads less than a page)",
-            h.image_bytes - end
-        )));
-    }
     Ok(extents)
+}
+
+/// Refuses an image that runs a page or more past its last extent when it is to be decoded
+/// whole (in core): the writer pads less than a page, so the zeros would be the header's
+/// claim alone, and `Scene::open` would allocate them. (A pager's region only reserves
+/// address space for them, never touched.)
+pub(super) fn check_tail(path: &Path, h: &Header, extents: &[Extent]) -> Result<(), SceneError> {
+    let end = extents.last().map_or(0, |e| {
+        let end = e.image_off + e.image_len;
+        if e.kind == EXTENT_TILE {
+            end.next_multiple_of(PAGE)
+        } else {
+            end
+        }
+    });
+    if h.image_bytes.saturating_sub(end) >= PAGE {
+        return Err(SceneError::corrupt(
+            path,
+            format!(
+                "the image runs {} bytes past its last extent (a writer pads less than a page)",
+                h.image_bytes - end
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// This machine's memory, in bytes (0 where unknown).
