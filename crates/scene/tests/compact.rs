@@ -262,9 +262,10 @@ fn crafted_extent_tables_are_refused() {
     b[216..224].copy_from_slice(&((1u64 << 44) + 4096).to_le_bytes());
     seal(&mut b);
     refused(&b, "an image past 2^44 bytes");
-    // A few bytes of file claiming a large image (what a fuzzer's file made `Scene::open`
-    // allocate: 880 MiB from 12 KiB): an image past its last extent, a gap between two
-    // extents, a tile said to grow more than the codec can.
+    // A few bytes of file claiming a large image (a fuzzer's 12 KiB file claimed 880 MiB of
+    // uncovered image and put a section in it): an image past its last extent (refused
+    // where the image is allocated, in core), a gap between two extents, a tile said to grow
+    // more than the codec can.
     let mut b = good.clone();
     b[216..224].copy_from_slice(&(h.image_bytes + (1 << 30)).to_le_bytes());
     seal(&mut b);

@@ -23,10 +23,9 @@ const MAX_GROWTH: u64 = 256;
 /// the file, none overlapping; tiles starting on a page, alone in their last page, at most
 /// [`MAX_TILE`] long, stored smaller and at most [`MAX_GROWTH`] times smaller; the first
 /// extent the header, stored where it lies; less than a page of padding between extents
-/// ([`check_tail`]: and after the last, for a file opened in core). A file that passes makes every load read each stored byte at most once
-/// per tile and allocate at most a tile's bytes, and its image is at most about 256 times
-/// the file (a few bytes of file cannot claim an image of gigabytes for `Scene::open` to
-/// allocate).
+/// ([`check_tail`]: and after the last, for a file opened in core). A file that passes makes
+/// every load read each stored byte at most once per tile and allocate at most a tile's
+/// bytes.
 pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Result<Vec<Extent>, SceneError> {
     let bad = |what: String| SceneError::corrupt(path, what);
     let bytes = h
@@ -79,10 +78,7 @@ pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Re
                 e.image_off - end
             )));
         }
-        end = e.image_off + e.image_len;
-        if e.kind == EXTENT_TILE {
-            end = end.next_multiple_of(PAGE);
-        }
+        end = covered_end(e);
         stored = e.stored_off + e.stored_len;
     }
     if extents.is_empty() {
@@ -96,14 +92,7 @@ pub(super) fn read_extents(path: &Path, file: &File, h: &Header, len: u64) -> Re
 /// claim alone, and `Scene::open` would allocate them. (A pager's region only reserves
 /// address space for them, never touched.)
 pub(super) fn check_tail(path: &Path, h: &Header, extents: &[Extent]) -> Result<(), SceneError> {
-    let end = extents.last().map_or(0, |e| {
-        let end = e.image_off + e.image_len;
-        if e.kind == EXTENT_TILE {
-            end.next_multiple_of(PAGE)
-        } else {
-            end
-        }
-    });
+    let end = extents.last().map_or(0, covered_end);
     if h.image_bytes.saturating_sub(end) >= PAGE {
         return Err(SceneError::corrupt(
             path,
@@ -114,6 +103,16 @@ pub(super) fn check_tail(path: &Path, h: &Header, extents: &[Extent]) -> Result<
         ));
     }
     Ok(())
+}
+
+/// Where the image bytes extent `e` accounts for end: a tile's whole last page is its own.
+fn covered_end(e: &Extent) -> u64 {
+    let end = e.image_off + e.image_len;
+    if e.kind == EXTENT_TILE {
+        end.next_multiple_of(PAGE)
+    } else {
+        end
+    }
 }
 
 /// This machine's memory, in bytes (0 where unknown).
